@@ -1,7 +1,7 @@
 """Numpy reference of the GGX-Smith BRDF, for tests that hold the GPU integrators to account.
 
-Uses uniform hemisphere sampling (a different estimator from the shaders' GGX importance sampling)
-so that an error in the importance-sampling weights cannot hide in both.
+The integrators here are written out in full, without the algebraic shortcuts the shaders take, so
+that a slip in a shader's weights cannot hide in both.
 """
 
 from __future__ import annotations
@@ -22,22 +22,28 @@ def smith_ggx_visibility(n_dot_v: np.ndarray, n_dot_l: np.ndarray, alpha: float)
     return 0.5 / np.maximum(gv + gl, 1e-30)
 
 
-def split_sum_terms(n_dot_v: float, roughness: float, samples: int = 400_000, seed: int = 0) -> tuple[float, float]:
-    """(A, B) with directional albedo = F0 * A + B, by uniform hemisphere Monte Carlo."""
+def split_sum_terms(n_dot_v: float, roughness: float, samples: int = 1_000_000, seed: int = 0) -> tuple[float, float]:
+    """(A, B) with directional albedo = F0 * A + B, by Monte Carlo over GGX-distributed half vectors.
+
+    Unlike the shader, nothing cancels analytically: the estimator evaluates the full BRDF
+    D * V * F * cos and divides by the explicit pdf of the reflected direction, with a random
+    stream instead of the shader's Hammersley points.
+    """
     rng = np.random.default_rng(seed)
-    alpha = roughness * roughness
-    # Stratified uniform hemisphere: cos(theta) uniform in [0, 1], pdf = 1 / (2 pi).
-    u1 = (np.arange(samples) + rng.random(samples)) / samples
-    u2 = rng.random(samples)
-    cos_t = u1
-    sin_t = np.sqrt(1.0 - cos_t**2)
-    phi = 2.0 * np.pi * u2
-    l = np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t], axis=1)
-    v = np.array([np.sqrt(1.0 - n_dot_v**2), 0.0, n_dot_v])
-    h = l + v
-    h /= np.linalg.norm(h, axis=1, keepdims=True)
+    alpha = max(roughness * roughness, 1e-4)
+    xi1, xi2 = rng.random(samples), rng.random(samples)
+    cos_h = np.sqrt((1.0 - xi1) / (1.0 + (alpha * alpha - 1.0) * xi1))
+    sin_h = np.sqrt(np.maximum(0.0, 1.0 - cos_h**2))
+    phi = 2.0 * np.pi * xi2
+    h = np.stack([sin_h * np.cos(phi), sin_h * np.sin(phi), cos_h], axis=1)
+    v = np.array([np.sqrt(max(0.0, 1.0 - n_dot_v**2)), 0.0, n_dot_v])
+    v_dot_h = h @ v
+    l = 2.0 * v_dot_h[:, None] * h - v
     n_dot_l = l[:, 2]
-    f = ggx_distribution(h[:, 2], alpha) * smith_ggx_visibility(n_dot_v, n_dot_l, alpha)
-    fc = (1.0 - np.clip(h @ v, 0.0, 1.0)) ** 5
-    integrand = f * n_dot_l * 2.0 * np.pi
-    return float(np.mean((1.0 - fc) * integrand)), float(np.mean(fc * integrand))
+    ok = (n_dot_l > 0.0) & (v_dot_h > 0.0)
+    d = ggx_distribution(cos_h, alpha)
+    pdf_l = d * cos_h / (4.0 * np.maximum(v_dot_h, 1e-30))
+    brdf_cos = d * smith_ggx_visibility(n_dot_v, np.maximum(n_dot_l, 0.0), alpha) * np.maximum(n_dot_l, 0.0)
+    weight = np.where(ok, brdf_cos / np.maximum(pdf_l, 1e-30), 0.0)
+    fc = (1.0 - np.clip(v_dot_h, 0.0, 1.0)) ** 5
+    return float(np.mean((1.0 - fc) * weight)), float(np.mean(fc * weight))

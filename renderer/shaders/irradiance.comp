@@ -1,6 +1,6 @@
 #version 430
 #include "common.glsl"
-// Diffuse irradiance cube: E(n) / pi = (1/pi) * sum_j L_j max(0, n . d_j) dOmega_j, stored in
+// Diffuse irradiance cube from the binned panorama (ibl.irradiance_sources): E(n) / pi = (1/pi) * sum_j L_j max(0, n . d_j) dOmega_j, stored in
 // radiance units so that a white Lambertian surface reflects exactly this value.
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 struct Source { vec4 direction_solid_angle; vec4 radiance; };
