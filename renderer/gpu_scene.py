@@ -31,6 +31,9 @@ class GpuScene:
             raise ValueError("a scene needs at least one mesh")
         self.ctx = ctx
         self.transform = np.eye(4) if transform is None else np.asarray(transform, dtype=np.float64)
+        # Mesa's llvmpipe (22.x) blurs even magnified textures when anisotropic filtering is on
+        # (measured: 0.17 albedo error on a magnified 16x16 texture), so only GPUs get it.
+        self._anisotropy = 1.0 if "llvmpipe" in ctx.info.get("GL_RENDERER", "") else 8.0
         self._owned_textures: list[moderngl.Texture] = []
         self._texture_cache: dict[tuple[int, str], moderngl.Texture] = {}
         self._defaults = {
@@ -100,7 +103,7 @@ class GpuScene:
         if mipmaps:
             tex.build_mipmaps()
             tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
-            tex.anisotropy = 8.0
+            tex.anisotropy = self._anisotropy
         else:
             tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self._owned_textures.append(tex)
