@@ -27,3 +27,35 @@ def gl_context():
     ctx = create_headless_context()
     yield ctx
     ctx.release()
+
+
+@pytest.fixture(scope="session")
+def x_display():
+    """An X display for window tests: $DISPLAY if set, else a private Xvfb started for the session."""
+    import shutil
+    import subprocess
+
+    if os.environ.get("DISPLAY"):
+        yield os.environ["DISPLAY"]
+        return
+    if shutil.which("Xvfb") is None:
+        pytest.skip("no X display and no Xvfb (apt-get install xvfb; `make setup` installs it)")
+    read_fd, write_fd = os.pipe()
+    proc = subprocess.Popen(
+        ["Xvfb", "-displayfd", str(write_fd), "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
+        pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )
+    os.close(write_fd)
+    with os.fdopen(read_fd) as pipe:
+        number = pipe.readline().strip()  # Xvfb writes the display number once it accepts clients
+    if not number:
+        proc.kill()
+        pytest.skip("Xvfb did not start")
+    display = f":{number}"
+    os.environ["DISPLAY"] = display
+    try:
+        yield display
+    finally:
+        os.environ.pop("DISPLAY", None)
+        proc.terminate()
+        proc.wait(timeout=10)

@@ -1,0 +1,49 @@
+# LIRM Studio set-up. `make demo` and `make test` do everything on a fresh Debian machine:
+# Debian packages for headless OpenGL and Xvfb (when missing), a virtualenv in .venv, torch 2.13.0
+# (the CPU build) before anything else so that no CUDA build is pulled, then the project and its
+# dev extras in editable mode.
+
+PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+DEMO_DIR ?= demo_output
+SHARED_DATA ?= ../shared/data
+DEBIAN_PACKAGES := libegl1 libegl-mesa0 libgl1 libglx-mesa0 libgl1-mesa-dri xvfb xauth xdotool imagemagick
+
+.PHONY: demo test setup system-packages bench-render clean
+
+demo: setup
+	$(BIN)/lirm demo -o $(DEMO_DIR)
+
+test: setup
+	$(BIN)/python -m pytest
+
+setup: system-packages $(VENV)/.installed
+
+# Installs only what is missing; needs root (apt-get) the first time.
+system-packages:
+	@missing=""; for p in $(DEBIAN_PACKAGES); do dpkg-query -W -f='$${Status}' $$p 2>/dev/null | grep -q "ok installed" || missing="$$missing $$p"; done; \
+	$(PYTHON) -c "import ensurepip" 2>/dev/null || missing="$$missing python3-venv"; \
+	if [ -n "$$missing" ]; then \
+	  if [ "$$(id -u)" = "0" ]; then \
+	    echo "installing Debian packages:$$missing"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing; \
+	  else \
+	    echo "missing Debian packages:$$missing"; echo "run: sudo apt-get install$$missing"; exit 1; \
+	  fi; \
+	fi
+
+$(VENV)/.installed: pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q torch==2.13.0
+	$(BIN)/python -m pip install -q -e '.[dev]'
+	touch $@
+
+# The issue's renderer figures: DamagedHelmet at 512² and 1024², a 1k HDR.
+bench-render: setup
+	$(BIN)/lirm bench render --model $(SHARED_DATA)/pbr_models/DamagedHelmet_gltf/DamagedHelmet.gltf \
+	  --env $(SHARED_DATA)/envmaps/studio_small_03_1k.hdr --sizes 512,1024 --frames 20
+
+clean:
+	rm -rf $(VENV) $(DEMO_DIR) build *.egg-info

@@ -1,0 +1,146 @@
+"""The `lirm` command line: what a user types, what lands on disk, and clear errors for bad input."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from lirm.engine.cameras import Camera
+from lirm.engine.cli import main
+
+LIRM = [sys.executable, "-m", "lirm.engine.cli"]
+
+
+def run_cli(capsys, *args: str) -> tuple[int, str, str]:
+    code = main(list(args))
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_help_lists_only_built_subcommands():
+    out = subprocess.run([*LIRM, "--help"], capture_output=True, text=True, check=True).stdout
+    for command in ("demo", "render", "bench"):
+        assert command in out
+    for not_yet in ("reconstruct", "export", "train", "suggest", "eval", "app"):
+        assert f"    {not_yet} " not in out
+
+
+def test_render_builtin_object_writes_every_channel_and_consistent_cameras(tmp_path, capsys):
+    out_dir = tmp_path / "mug"
+    code, out, err = run_cli(capsys, "render", "mug", "--env", "overcast", "--views", "3", "--size", "80x64",
+                             "--supersample", "1", "-o", str(out_dir))
+    assert code == 0, err
+    assert str(out_dir) in out
+    meta = json.loads((out_dir / "transforms.json").read_text())
+    assert len(meta["frames"]) == 3
+    for frame in meta["frames"]:
+        for key in ("file_path", "albedo_file_path", "roughness_file_path", "metallic_file_path", "normal_file_path",
+                    "depth_file_path", "mask_path", "radiance_file_path"):
+            assert (out_dir / frame[key]).is_file(), key
+        beauty = cv2.imread(str(out_dir / frame["file_path"]), cv2.IMREAD_UNCHANGED)
+        assert beauty.shape == (64, 80, 3)
+        # The camera in transforms.json sees the object where the mask says it is: the normalised
+        # object sits at the origin, which projects inside the mask.
+        camera = Camera.from_dict({**meta, **frame})
+        (x, y), _ = camera.project(np.zeros(3))
+        mask = cv2.imread(str(out_dir / frame["mask_path"]), cv2.IMREAD_UNCHANGED)
+        assert mask[int(y), int(x)] == 255
+        depth = cv2.imread(str(out_dir / frame["depth_file_path"]), cv2.IMREAD_UNCHANGED)
+        assert depth.dtype == np.uint16
+        z = depth[int(y), int(x)] * meta["depth_unit_scale_factor"]
+        assert 0 < z < np.linalg.norm(camera.center)  # the surface is in front of the object's centre
+
+
+def test_render_without_background_writes_rgba_with_coverage(tmp_path, capsys):
+    code, _, err = run_cli(capsys, "render", "vase", "--views", "1", "--size", "48x48", "--no-background", "-o", str(tmp_path))
+    assert code == 0, err
+    rgba = cv2.imread(str(tmp_path / "beauty" / "000.png"), cv2.IMREAD_UNCHANGED)
+    mask = cv2.imread(str(tmp_path / "mask" / "000.png"), cv2.IMREAD_UNCHANGED)
+    assert rgba.shape == (48, 48, 4)
+    np.testing.assert_array_equal(rgba[:, :, 3], mask)
+    assert rgba[0, 0, 3] == 0 and rgba[24, 24, 3] == 255
+
+
+def test_render_a_gltf_under_a_real_hdr(tmp_path, capsys, shared_data):
+    code, _, err = run_cli(capsys, "render", str(shared_data / "pbr_models" / "Avocado_tex256.glb"),
+                           "--env", str(shared_data / "envmaps" / "forest_slope_1k.hdr"), "--views", "2",
+                           "--size", "64x64", "-o", str(tmp_path))
+    assert code == 0, err
+    assert len(list((tmp_path / "beauty").glob("*.png"))) == 2
+
+
+def _expect_user_error(capsys, *args: str, mentions: str) -> str:
+    code, _, err = run_cli(capsys, *args)
+    assert code == 2
+    assert "Traceback" not in err
+    assert err.startswith("error: ")
+    assert mentions in err
+    return err
+
+
+def test_bad_environment_files_are_clear_errors(tmp_path, capsys, shared_data):
+    out = str(tmp_path / "out")
+    _expect_user_error(capsys, "render", "vase", "--env", str(tmp_path / "nope.hdr"), "-o", out, mentions="nope.hdr")
+    truncated = tmp_path / "truncated.hdr"
+    data = (shared_data / "envmaps" / "studio_small_03_1k.hdr").read_bytes()
+    truncated.write_bytes(data[: len(data) // 2])
+    _expect_user_error(capsys, "render", "vase", "--env", str(truncated), "-o", out, mentions="truncated.hdr")
+    fake = tmp_path / "photo.hdr"
+    cv2.imwrite(str(tmp_path / "photo.png"), np.zeros((32, 64, 3), np.uint8))
+    shutil.copy(tmp_path / "photo.png", fake)
+    _expect_user_error(capsys, "render", "vase", "--env", str(fake), "-o", out, mentions="photo.hdr")
+    _expect_user_error(capsys, "render", "vase", "--env", "moonbase", "-o", out, mentions="studio")
+    assert not (tmp_path / "out").exists()  # nothing half-written
+
+
+def test_bad_models_are_clear_errors_and_missing_textures_are_warnings(tmp_path, capsys, shared_data):
+    out = str(tmp_path / "out")
+    _expect_user_error(capsys, "render", str(tmp_path / "missing.glb"), "-o", out, mentions="missing.glb")
+    _expect_user_error(capsys, "render", "teapot", "-o", out, mentions="vase")
+    broken = tmp_path / "broken.glb"
+    broken.write_bytes((shared_data / "pbr_models" / "Avocado_tex256.glb").read_bytes()[:5000])
+    _expect_user_error(capsys, "render", str(broken), "-o", out, mentions="broken.glb")
+
+    helmet = tmp_path / "helmet"
+    shutil.copytree(shared_data / "pbr_models" / "DamagedHelmet_gltf", helmet)
+    (helmet / "Default_normal.jpg").unlink()
+    code, _, err = run_cli(capsys, "render", str(helmet / "DamagedHelmet.gltf"), "--views", "1", "--size", "32x32", "-o", out)
+    assert code == 0
+    assert "Default_normal.jpg" in err and "WARNING" in err
+
+
+def test_bad_arguments(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["render", "vase", "--size", "big", "-o", str(tmp_path)])
+    assert exc.value.code == 2
+    assert "size must look like 512x512" in capsys.readouterr().err
+    _expect_user_error(capsys, "render", "vase", "--views", "0", "-o", str(tmp_path), mentions="views")
+
+
+def test_bench_render_reports_positive_rates(tmp_path, capsys):
+    code, out, err = run_cli(capsys, "bench", "render", "--model", "toy_block", "--env", "sky", "--sizes", "32,48",
+                             "--frames", "2", "--json", str(tmp_path / "bench.json"))
+    assert code == 0, err
+    result = json.loads((tmp_path / "bench.json").read_text())
+    assert set(result["fps"]) == {"32x32", "48x48"}
+    assert all(v["gpu"] > 0 and v["readback"] > 0 for v in result["fps"].values())
+    assert result["environment_seconds"]["specular_prefilter"] > 0
+    assert "GPU only fps" in out
+
+
+@pytest.mark.slow
+def test_demo_command_renders_the_builtin_objects(tmp_path):
+    proc = subprocess.run([str(Path(sys.executable).parent / "lirm"), "demo", "-o", str(tmp_path / "demo")],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    assert "demo pictures are in" in proc.stdout
+    overview = cv2.imread(str(tmp_path / "demo" / "overview.png"))
+    assert overview.shape[0] > 0 and overview.std() > 10  # not a blank sheet
+    assert len(list((tmp_path / "demo").glob("*/*/beauty/*.png"))) == 24
