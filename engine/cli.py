@@ -38,11 +38,11 @@ def build_parser() -> argparse.ArgumentParser:
     demo.set_defaults(run=_run_demo)
 
     render = sub.add_parser("render", help="render an asset from an orbit of cameras: beauty + G-buffer PNGs + transforms.json")
-    render.add_argument("asset", help="a .gltf/.glb/.obj file or a built-in object name (see --list)")
+    render.add_argument("asset", nargs="?", help="a .gltf/.glb/.obj file or a built-in object name (see --list)")
     render.add_argument("--env", default="studio", help="built-in environment (studio, sky, overcast) or an .hdr/.exr path")
     render.add_argument("--views", type=int, default=8, help="number of orbit views (default 8)")
     render.add_argument("--size", type=_size, default=(512, 512), help="image size WxH (default 512x512)")
-    render.add_argument("-o", "--out", type=Path, required=True, help="output folder")
+    render.add_argument("-o", "--out", type=Path, help="output folder (required)")
     render.add_argument("--elevation", type=float, default=20.0, help="camera elevation in degrees (default 20)")
     render.add_argument("--fov", type=float, default=40.0, help="field of view of the shorter image side, degrees (default 40)")
     render.add_argument("--exposure", type=float, default=0.0, help="camera exposure in EV (default 0)")
@@ -102,6 +102,8 @@ def _run_render(args: argparse.Namespace) -> int:
         print("built-in objects:      " + ", ".join(BUILTIN_OBJECTS))
         print("built-in environments: " + ", ".join(PROCEDURAL_ENVIRONMENTS))
         return 0
+    if args.asset is None or args.out is None:
+        raise LirmUserError("lirm render needs an ASSET and -o OUT_DIR (lirm render --list shows the built-in assets)")
     try:
         config = OrbitRenderConfig(
             views=args.views, width=args.size[0], height=args.size[1], elevation_deg=args.elevation, fov_deg=args.fov,

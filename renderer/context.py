@@ -3,6 +3,11 @@
 The renderer needs OpenGL 4.3 (compute shaders for environment preprocessing). Mesa's llvmpipe
 gives 4.5 through EGL on machines without a GPU; an NVIDIA driver gives the same through its
 EGL vendor library.
+
+One thread, one kind of context: while a headless EGL context is current on a thread, making a GLX
+window context current on that thread fails (X error BadAccess on X_GLXMakeCurrent, seen with Mesa
+22 under Xvfb). Leave the EGL context first (`ctx.__exit__(None, None, None)`, or create it inside
+`with ctx:`), or keep headless work in another process.
 """
 
 from __future__ import annotations
