@@ -81,7 +81,6 @@ class PBRRenderer:
         self._fullscreen_tonemap = ctx.vertex_array(self.tonemap_program, [])
         self.baker = IBLBaker(ctx, ibl_config)
         self._targets: dict[tuple[int, int], _GBuffer] = {}
-        self.roughness_override: float | None = None  # for tests of the IBL terms only
 
     # ---- resources -------------------------------------------------------------------------
     def upload(self, meshes: list[MeshData], transform: np.ndarray | None = None) -> GpuScene:
@@ -152,8 +151,6 @@ class PBRRenderer:
         _write(prog, "u_environment_rotation", env_rotation)
         _set(prog, "u_environment_intensity", intensity)
         _set(prog, "u_multiple_scattering", int(settings.multiple_scattering))
-        _set(prog, "u_debug_roughness_override", int(self.roughness_override is not None))
-        _set(prog, "u_roughness_override", float(self.roughness_override or 0.0))
         mirrored = np.linalg.det(scene.transform[:3, :3]) < 0
         ctx.front_face = "cw" if mirrored else "ccw"
         for mesh in scene.meshes:

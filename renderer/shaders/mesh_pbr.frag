@@ -39,8 +39,6 @@ uniform float u_specular_max_lod;
 uniform mat3 u_environment_rotation;      // world direction -> environment frame
 uniform float u_environment_intensity;    // 2^exposure
 uniform int u_multiple_scattering;
-uniform int u_debug_roughness_override;   // tests: <0 off
-uniform float u_roughness_override;
 
 vec3 environment_direction(vec3 world_dir) { return u_environment_rotation * world_dir; }
 
@@ -50,7 +48,6 @@ void main() {
     vec4 mr = texture(u_metallic_roughness_texture, v_uv);
     float roughness = clamp(u_roughness_factor * mr.g, 0.0, 1.0);
     float metallic = clamp(u_metallic_factor * mr.b, 0.0, 1.0);
-    if (u_debug_roughness_override == 1) roughness = u_roughness_override;
     float occlusion = 1.0 + u_occlusion_strength * (texture(u_occlusion_texture, v_uv).r - 1.0);
     vec3 emissive = u_emissive_factor * texture(u_emissive_texture, v_uv).rgb;
 

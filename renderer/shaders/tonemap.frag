@@ -7,7 +7,6 @@ layout(location = 0) out vec4 o_color;
 uniform sampler2D u_radiance;  // linear HDR, a = coverage
 uniform float u_exposure;      // 2^EV
 uniform int u_tonemapper;      // 0 = ACES fit, 1 = linear clamp
-uniform int u_flip_y;          // 1 when writing into a texture that is read back top row first
 
 const mat3 ACES_INPUT = mat3(0.59719, 0.07600, 0.02840, 0.35458, 0.90834, 0.13383, 0.04823, 0.01566, 0.83777);
 const mat3 ACES_OUTPUT = mat3(1.60475, -0.10208, -0.00327, -0.53108, 1.10813, -0.07276, -0.07367, -0.00605, 1.07602);
@@ -19,9 +18,7 @@ vec3 rrt_odt_fit(vec3 v) {
 }
 
 void main() {
-    ivec2 p = ivec2(gl_FragCoord.xy);
-    if (u_flip_y == 1) p.y = textureSize(u_radiance, 0).y - 1 - p.y;
-    vec4 hdr = texelFetch(u_radiance, p, 0);
+    vec4 hdr = texelFetch(u_radiance, ivec2(gl_FragCoord.xy), 0);
     vec3 c = max(hdr.rgb * u_exposure, 0.0);
     if (u_tonemapper == 0) c = ACES_OUTPUT * rrt_odt_fit(ACES_INPUT * c);
     o_color = vec4(linear_to_srgb(clamp(c, 0.0, 1.0)), hdr.a);
