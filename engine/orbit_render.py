@@ -30,6 +30,8 @@ from .io.atomic_files import atomic_write_json
 from .io.images import to_uint8, write_exr, write_png
 
 CHANNELS = ("beauty", "radiance", "albedo", "roughness", "metallic", "normal", "depth", "mask")
+# The G-buffer takes 88 bytes a pixel (five RGBA float targets, depth, display): 8192² is ~6 GB.
+MAX_RENDER_SIDE = 8192
 DEPTH_UNIT = 1e-4  # 16-bit depth in 0.1 mm of scene units: 6.5 units of range, ample for a unit sphere
 
 
@@ -53,6 +55,12 @@ class OrbitRenderConfig:
             raise ValueError("views must be at least 1")
         if not (16 <= self.width <= 8192 and 16 <= self.height <= 8192):
             raise ValueError(f"image size {self.width}x{self.height} must be between 16 and 8192 pixels a side")
+        longest = max(self.width, self.height) * self.supersample
+        if longest > MAX_RENDER_SIDE:
+            raise ValueError(
+                f"{self.width}x{self.height} with supersample {self.supersample} renders {longest} pixels a side, "
+                f"more than {MAX_RENDER_SIDE}: lower --size or --supersample"
+            )
         if not 1.0 < self.fov_deg < 170.0:
             raise ValueError("fov_deg must be between 1 and 170 degrees")
 

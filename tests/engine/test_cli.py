@@ -122,6 +122,8 @@ def test_bad_arguments(tmp_path, capsys):
     assert exc.value.code == 2
     assert "size must look like 512x512" in capsys.readouterr().err
     _expect_user_error(capsys, "render", "vase", "--views", "0", "-o", str(tmp_path), mentions="views")
+    _expect_user_error(capsys, "render", "vase", "--size", "4096x4096", "--supersample", "4", "-o", str(tmp_path),
+                       mentions="lower --size or --supersample")
 
 
 def test_bench_render_reports_positive_rates(tmp_path, capsys):
