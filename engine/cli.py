@@ -50,6 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--supersample", type=int, default=2, choices=[1, 2, 3, 4], help="anti-aliasing factor (default 2)")
     render.add_argument("--no-background", action="store_true", help="transparent background (RGBA beauty)")
     render.add_argument("--keep-scale", action="store_true", help="do not fit the asset into the unit sphere")
+    render.add_argument("--ibl", default="default", choices=["default", "preview", "high"],
+                        help="environment filtering quality: preview is faster on a CPU, high is finer on a GPU")
     render.add_argument("--list", action="store_true", help="list the built-in objects and environments and exit")
     render.set_defaults(run=_run_render)
 
@@ -60,6 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
     br.add_argument("--env", default="studio", help="built-in environment or .hdr/.exr (the issue's figures use a 1k HDR)")
     br.add_argument("--sizes", default="512,1024", help="square image sizes, comma separated")
     br.add_argument("--frames", type=int, default=20, help="frames per size")
+    br.add_argument("--ibl", default="default", choices=["default", "preview", "high"], help="environment filtering preset")
     br.add_argument("--json", type=Path, help="also write the results as JSON here")
     br.set_defaults(run=_run_bench_render)
     return parser
@@ -114,8 +117,10 @@ def _run_render(args: argparse.Namespace) -> int:
         raise LirmUserError(str(err)) from None
     model = resolve_asset(args.asset)
     environment = resolve_environment(args.env)
+    from lirm.renderer.ibl import IBL_PRESETS
+
     ctx = create_headless_context()
-    renderer = PBRRenderer(ctx)
+    renderer = PBRRenderer(ctx, IBL_PRESETS[args.ibl])
     try:
         with _progress_bar(config.views, "rendering") as bar:
             result = render_orbit(renderer, model, environment, config, args.out, progress=lambda done, total: bar.update(1))
@@ -145,7 +150,7 @@ def _run_bench_render(args: argparse.Namespace) -> int:
         sizes = tuple(int(s) for s in args.sizes.split(","))
     except ValueError:
         raise LirmUserError(f"--sizes must be comma-separated integers, got {args.sizes!r}") from None
-    config = RenderBenchConfig(model=args.model, environment=args.env, sizes=sizes, frames=args.frames)
+    config = RenderBenchConfig(model=args.model, environment=args.env, sizes=sizes, frames=args.frames, ibl_preset=args.ibl)
     result = run_render_bench(config, progress=lambda message: print(message, file=sys.stderr))
     print(result.table())
     if args.json:

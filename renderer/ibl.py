@@ -40,7 +40,7 @@ class IBLConfig:
 
 IBL_PRESETS = {
     "default": IBLConfig(),
-    "preview": IBLConfig(max_cube_size=256, specular_samples=64),
+    "preview": IBLConfig(max_cube_size=256, specular_samples=64, irradiance_size=32, irradiance_bright_texels=1024),
     "high": IBLConfig(max_cube_size=1024, specular_samples=512, irradiance_source_height=128),
 }
 

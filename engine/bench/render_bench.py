@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from lirm.renderer.context import create_headless_context, describe
-from lirm.renderer.ibl import IBLBaker
+from lirm.renderer.ibl import IBL_PRESETS, IBLBaker
 from lirm.renderer.pbr_renderer import PBRRenderer, RenderSettings
 
 from ..assets.asset_source import resolve_asset
@@ -29,6 +29,7 @@ class RenderBenchConfig:
     sizes: tuple[int, ...] = (512, 1024)
     frames: int = 20
     environment_repeats: int = 3
+    ibl_preset: str = "default"
 
 
 @dataclass
@@ -37,13 +38,14 @@ class RenderBenchResult:
     model: str
     environment: str
     environment_size: tuple[int, int]
+    ibl_preset: str = "default"
     environment_seconds: dict[str, float] = field(default_factory=dict)
     fps: dict[str, dict[str, float]] = field(default_factory=dict)  # size -> {"gpu": fps, "readback": fps}
 
     def table(self) -> str:
         lines = [f"device: {self.device}", f"model: {self.model}",
                  f"environment: {self.environment} ({self.environment_size[0]}x{self.environment_size[1]})",
-                 "", "environment preprocessing (median seconds)"]
+                 "", f"environment preprocessing, IBL preset '{self.ibl_preset}' (median seconds)"]
         lines += [f"  {k:<20} {v:8.3f}" for k, v in self.environment_seconds.items()]
         lines += ["", f"  {'size':<12} {'GPU only fps':>14} {'+ G-buffer readback fps':>24}"]
         lines += [f"  {size:<12} {v['gpu']:>14.1f} {v['readback']:>24.1f}" for size, v in self.fps.items()]
@@ -53,13 +55,14 @@ class RenderBenchResult:
 def run_render_bench(config: RenderBenchConfig, progress=None) -> RenderBenchResult:
     say = progress or (lambda message: None)
     ctx = create_headless_context()
-    renderer = PBRRenderer(ctx)
+    renderer = PBRRenderer(ctx, IBL_PRESETS[config.ibl_preset])
     try:
         say(f"loading {config.environment}")
         t0 = time.perf_counter()
         environment = resolve_environment(config.environment)
         load_seconds = time.perf_counter() - t0
-        result = RenderBenchResult(describe(ctx), str(config.model), environment.name, (environment.width, environment.height))
+        result = RenderBenchResult(describe(ctx), str(config.model), environment.name, (environment.width, environment.height),
+                                   ibl_preset=config.ibl_preset)
 
         t0 = time.perf_counter()
         lut_baker = IBLBaker(ctx)
