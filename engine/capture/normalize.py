@@ -1,0 +1,143 @@
+"""Normalisation: move the posed capture into the model's world frame.
+
+Object at the origin, inside the sphere of radius R (DESIGN.md §3), +Z up. From:
+- up: the cameras' average up vector (a photographer holds the camera roughly upright),
+- centre: where the optical axes converge (least squares), refined by the sparse points near it,
+- radius: a high percentile of those points' distances (the object), with a margin,
+- heading: turned about +Z so the first camera looks along +Y, i.e. sees the object's front as the
+  renderer's orbit azimuth 0 does.
+The transform (source world -> normalised world, a similarity) is kept so exports can undo it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from lirm.engine.cameras import Camera
+
+
+@dataclass(frozen=True)
+class NormalizeConfig:
+    target_radius: float = 1.0  # R: the object ends inside this sphere
+    fill: float = 0.85  # the estimated object radius maps to fill * R (room for estimation error)
+    core_fraction: float = 0.6  # sparse points within this fraction of the median camera distance count as object
+    radius_percentile: float = 95.0
+    min_points: int = 20
+
+
+@dataclass
+class Normalization:
+    world_from_source: np.ndarray  # 4x4 similarity
+    center_source: np.ndarray  # object centre in the source frame
+    radius_source: float  # estimated object radius in source units
+    up_source: np.ndarray  # unit up direction in the source frame
+    used_points: int  # sparse points that informed centre and radius (0 = cameras only)
+
+    @property
+    def scale(self) -> float:
+        return float(np.cbrt(abs(np.linalg.det(self.world_from_source[:3, :3]))))
+
+    def apply_to_camera(self, camera: Camera) -> Camera:
+        c2w = self.world_from_source @ camera.c2w
+        c2w[:3, :3] /= self.scale  # keep the rotation orthonormal: scale moves centres only
+        return camera.with_pose(c2w)
+
+    def apply_to_points(self, points: np.ndarray) -> np.ndarray:
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        return p @ self.world_from_source[:3, :3].T + self.world_from_source[:3, 3]
+
+    def to_dict(self) -> dict:
+        return {
+            "world_from_source": self.world_from_source.tolist(),
+            "center_source": self.center_source.tolist(),
+            "radius_source": self.radius_source,
+            "up_source": self.up_source.tolist(),
+            "used_points": self.used_points,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Normalization":
+        return cls(np.array(d["world_from_source"], dtype=np.float64), np.array(d["center_source"], dtype=np.float64),
+                   float(d["radius_source"]), np.array(d["up_source"], dtype=np.float64), int(d["used_points"]))
+
+
+def axes_convergence(cameras: list[Camera]) -> np.ndarray:
+    """The point closest (least squares) to every optical axis."""
+    a = np.zeros((3, 3))
+    b = np.zeros(3)
+    for cam in cameras:
+        d = cam.forward / np.linalg.norm(cam.forward)
+        p = np.eye(3) - np.outer(d, d)
+        a += p
+        b += p @ cam.center
+    if np.linalg.cond(a) > 1e8:  # parallel axes (all cameras looking the same way): no convergence
+        raise ValueError("the cameras' optical axes do not converge (all views look the same way)")
+    return np.linalg.solve(a, b)
+
+
+def estimate_normalization(cameras: dict[str, Camera], points: np.ndarray | None = None, config: NormalizeConfig = NormalizeConfig()) -> Normalization:
+    if not cameras:
+        raise ValueError("normalisation needs at least one posed camera")
+    cams = [cameras[k] for k in sorted(cameras)]
+    up = np.mean([c.up for c in cams], axis=0)
+    if np.linalg.norm(up) < 1e-6:
+        up = np.array([0.0, 0.0, 1.0])
+    up /= np.linalg.norm(up)
+    centres = np.array([c.center for c in cams])
+    if len(cams) >= 2:
+        try:
+            center = axes_convergence(cams)
+        except ValueError:
+            center = centres.mean(axis=0) + cams[0].forward * np.linalg.norm(centres.std(axis=0) + 1e-9)
+    else:
+        center = None
+    if center is None:  # one view: guess the object a median scene depth in front of it
+        depth = 1.0
+        if points is not None and len(points):
+            _, z = cams[0].project(points)
+            depth = float(np.median(z[z > 0])) if (z > 0).any() else 1.0
+        center = cams[0].center + cams[0].forward * depth
+    camera_distance = float(np.median(np.linalg.norm(centres - center, axis=1)))
+    if camera_distance <= 0:
+        camera_distance = 1.0
+
+    used = 0
+    radius = None
+    if points is not None and len(points) >= config.min_points:
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        near = p[np.linalg.norm(p - center, axis=1) < config.core_fraction * camera_distance]
+        if len(near) >= config.min_points:
+            # Centre = middle of the robust extent of the object points, in an up-aligned frame.
+            lo, hi = np.percentile(near, 5, axis=0), np.percentile(near, 95, axis=0)
+            center = (lo + hi) / 2.0
+            radius = float(np.percentile(np.linalg.norm(near - center, axis=1), config.radius_percentile))
+            used = len(near)
+    if radius is None or radius <= 0:
+        # Cameras only: assume the object fills about half of the narrowest field of view.
+        half_fov = np.deg2rad(min(min(c.fov_x_deg, c.fov_y_deg) for c in cams)) / 2.0
+        radius = camera_distance * np.sin(half_fov) * 0.5
+
+    rotation = _rotation_up_to_z(up)
+    # Heading: the first camera's horizontal viewing direction becomes +Y.
+    forward = rotation @ cams[0].forward
+    heading = np.arctan2(forward[0], forward[1])  # angle from +Y toward +X
+    c, s = np.cos(heading), np.sin(heading)
+    rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ rotation
+    scale = config.fill * config.target_radius / radius
+    transform = np.eye(4)
+    transform[:3, :3] = scale * rotation
+    transform[:3, 3] = -scale * rotation @ center
+    return Normalization(transform, np.asarray(center, dtype=np.float64), float(radius), up, used)
+
+
+def _rotation_up_to_z(up: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking `up` to +Z."""
+    z = np.array([0.0, 0.0, 1.0])
+    v = np.cross(up, z)
+    c = float(np.dot(up, z))
+    if np.linalg.norm(v) < 1e-12:
+        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
+    vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + vx + vx @ vx / (1.0 + c)
