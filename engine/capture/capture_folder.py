@@ -121,7 +121,7 @@ class Capture:
     # ---- the whole capture --------------------------------------------------------------------------
     def save(self) -> None:
         self.root.mkdir(parents=True, exist_ok=True)
-        atomic_write(self.root / "points.npy", lambda tmp: np.save(open(tmp, "wb"), self.points))
+        atomic_write(self.root / "points.npy", self._write_points)
         atomic_write_json(self.root / CAPTURE_FILE, {
             "format": "lirm-capture",
             "version": FORMAT_VERSION,
@@ -138,6 +138,10 @@ class Capture:
             "history": self.history,
         })
         self._write_transforms()
+
+    def _write_points(self, tmp: Path) -> None:
+        with open(tmp, "wb") as f:
+            np.save(f, self.points)
 
     def _write_transforms(self) -> None:
         frames = []
