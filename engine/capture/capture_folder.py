@@ -44,6 +44,7 @@ class FrameState:
     mask_status: str = "no mask"  # "ok" or what is wrong with it
     mask_source: str | None = None  # alpha | user | auto | fixed
     update: int | None = None  # the LIRM update that consumed this view
+    pinhole_image: Path | None = None  # undistorted copy (relative), when the pose has lens distortion
 
 
 @dataclass
@@ -59,8 +60,13 @@ class Capture:
     history: list[dict] = field(default_factory=list)
 
     # ---- paths ------------------------------------------------------------------------------------
-    def image_path(self, frame_id: str) -> Path:
-        return self.root / self.frames[frame_id].record.image
+    def image_path(self, frame_id: str, pinhole: bool = True) -> Path:
+        """The working image; with pinhole=True its undistorted copy where one exists (what the
+        cameras in `cameras` describe)."""
+        state = self.frames[frame_id]
+        if pinhole and state.pinhole_image is not None:
+            return self.root / state.pinhole_image
+        return self.root / state.record.image
 
     def mask_path(self, frame_id: str) -> Path:
         return self.root / "masks" / f"{frame_id}.png"
@@ -73,9 +79,9 @@ class Capture:
         return [self.frames[k].record for k in sorted(self.frames)]
 
     # ---- reading and writing pieces -----------------------------------------------------------------
-    def read_image(self, frame_id: str) -> np.ndarray:
-        """RGB(A) uint8 working image."""
-        path = self.image_path(frame_id)
+    def read_image(self, frame_id: str, pinhole: bool = True) -> np.ndarray:
+        """RGB(A) uint8 working image (see image_path)."""
+        path = self.image_path(frame_id, pinhole)
         image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
         if image is None:
             raise LirmUserError(f"{path}: the capture's working image cannot be read; re-run `lirm capture --add` with the original")
@@ -128,7 +134,8 @@ class Capture:
             "settings": self.settings,
             "frames": [
                 {**_record_dict(state.record), "pose_status": state.pose_status, "mask_status": state.mask_status,
-                 "mask_source": state.mask_source, "update": state.update}
+                 "mask_source": state.mask_source, "update": state.update,
+                 "pinhole_image": None if state.pinhole_image is None else state.pinhole_image.as_posix()}
                 for _, state in sorted(self.frames.items())
             ],
             "cameras": {k: self.cameras[k].to_dict() for k in sorted(self.cameras)},
@@ -146,7 +153,7 @@ class Capture:
     def _write_transforms(self) -> None:
         frames = []
         for frame_id in sorted(self.cameras):
-            entry = {"file_path": self.frames[frame_id].record.image.as_posix(), **self.cameras[frame_id].to_dict(),
+            entry = {"file_path": self.image_path(frame_id).relative_to(self.root).as_posix(), **self.cameras[frame_id].to_dict(),
                      "lirm_frame_id": frame_id}
             if self.mask_path(frame_id).exists():
                 entry["mask_path"] = f"masks/{frame_id}.png"
@@ -191,8 +198,9 @@ class Capture:
                 height=f["height"], sha256=f["sha256"], has_alpha=f.get("has_alpha", False), origin=f.get("origin", "photo"),
                 timestamp_s=f.get("timestamp_s"),
             )
+            pinhole = f.get("pinhole_image")
             capture.frames[record.frame_id] = FrameState(record, f.get("pose_status", "not posed"), f.get("mask_status", "no mask"),
-                                                         f.get("mask_source"), f.get("update"))
+                                                         f.get("mask_source"), f.get("update"), Path(pinhole) if pinhole else None)
         capture.cameras = {k: Camera.from_dict(v) for k, v in data.get("cameras", {}).items()}
         if data.get("normalization"):
             capture.normalization = Normalization.from_dict(data["normalization"])
