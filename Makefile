@@ -10,7 +10,7 @@ DEMO_DIR ?= demo_output
 SHARED_DATA ?= ../shared/data
 DEBIAN_PACKAGES := libegl1 libegl-mesa0 libgl1 libglx-mesa0 libgl1-mesa-dri xvfb xauth xdotool imagemagick
 
-.PHONY: demo test setup system-packages bench-render clean
+.PHONY: demo test setup system-packages bench-render bench-capture clean
 
 demo: setup
 	$(BIN)/lirm demo -o $(DEMO_DIR)
@@ -40,7 +40,11 @@ $(VENV)/.installed: pyproject.toml
 	$(BIN)/python -m pip install -q -e '.[dev]'
 	touch $@
 
-# The issue's renderer figures: DamagedHelmet at 512² and 1024², a 1k HDR.
+# Capture pipeline figures: 20 and 60 fox photos at long side 960, in fresh processes.
+bench-capture: setup
+	$(BIN)/lirm bench capture $(SHARED_DATA)/real_instantngp_fox/images --counts 20,60 --max-side 960
+
+# The renderer's figures: DamagedHelmet at 512² and 1024², a 1k HDR.
 bench-render: setup
 	$(BIN)/lirm bench render --model $(SHARED_DATA)/pbr_models/DamagedHelmet_gltf/DamagedHelmet.gltf \
 	  --env $(SHARED_DATA)/envmaps/studio_small_03_1k.hdr --sizes 512,1024 --frames 20

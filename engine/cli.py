@@ -33,7 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="store_true", help="more logging")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
 
-    demo = sub.add_parser("demo", help="run the main job on built-in data (renders the built-in objects for now)")
+    demo = sub.add_parser("demo", help="run the main job on built-in data: render, photograph and capture a built-in object")
     demo.add_argument("-o", "--out", type=Path, default=Path("demo_output"), help="output folder (default: ./demo_output)")
     demo.set_defaults(run=_run_demo)
 
@@ -55,6 +55,18 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--list", action="store_true", help="list the built-in objects and environments and exit")
     render.set_defaults(run=_run_render)
 
+    cap = sub.add_parser("capture", help="photos, a video or a camera -> a posed, masked, cropped capture folder")
+    cap.add_argument("inputs", help="a folder of photos, a video file, or camera:N for live camera N; with --add, the photos to add")
+    cap.add_argument("capture", nargs="?", type=Path, help="with --add: the capture folder to extend")
+    cap.add_argument("-o", "--out", type=Path, help="the capture folder to create")
+    cap.add_argument("--add", action="store_true", help="add the photos in INPUTS to the existing capture CAPTURE")
+    cap.add_argument("--poses", help="use known poses: a transforms.json (NeRF, instant-ngp, nerfstudio) or a COLMAP model folder")
+    cap.add_argument("--masks", default="auto", help="auto (alpha if every photo has one, else automatic), alpha, automatic, or a folder of masks")
+    cap.add_argument("--max-side", type=int, default=1280, help="long side of the working images (default 1280)")
+    cap.add_argument("--size", type=int, default=256, help="side of the network's square crops (default 256)")
+    cap.add_argument("--reference", type=Path, help="report pose errors against this transforms.json (for known test scenes)")
+    cap.set_defaults(run=_run_capture)
+
     bench = sub.add_parser("bench", help="benchmarks")
     bench_sub = bench.add_subparsers(title="benchmarks", metavar="BENCH", required=True)
     br = bench_sub.add_parser("render", help="renderer speed: environment preprocessing and G-buffer frames per second")
@@ -65,6 +77,13 @@ def build_parser() -> argparse.ArgumentParser:
     br.add_argument("--ibl", default="default", choices=["default", "preview", "high"], help="environment filtering preset")
     br.add_argument("--json", type=Path, help="also write the results as JSON here")
     br.set_defaults(run=_run_bench_render)
+    bc = bench_sub.add_parser("capture", help="capture pipeline speed and peak memory for N photos")
+    bc.add_argument("photos", type=Path, help="a folder of photos (the issue's figures use ../shared/data/real_instantngp_fox/images)")
+    bc.add_argument("--counts", default="20,60", help="photo counts, comma separated (default 20,60)")
+    bc.add_argument("--max-side", type=int, default=960, help="long side of the working images (default 960)")
+    bc.add_argument("--masks", default="auto", help="mask mode, as for lirm capture")
+    bc.add_argument("--json", type=Path, help="also write the results as JSON here")
+    bc.set_defaults(run=_run_bench_capture)
     return parser
 
 
@@ -132,14 +151,86 @@ def _run_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_capture(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from .capture.pipeline import CaptureConfig, add_to_capture, run_capture
+    from .capture.report import format_capture_report
+
+    config = CaptureConfig(masks=args.masks, poses=args.poses)
+    config = replace(config, ingest=replace(config.ingest, max_side=args.max_side), crop=replace(config.crop, size=args.size))
+    source: str | int = args.inputs
+    if args.inputs.startswith("camera:"):
+        try:
+            source = int(args.inputs.split(":", 1)[1])
+        except ValueError:
+            raise LirmUserError(f"{args.inputs}: write a camera as camera:0, camera:1, ...") from None
+    bars: dict = {}
+
+    def progress(stage: str, done: int, total: int) -> None:
+        from tqdm import tqdm
+
+        bar = bars.get(stage)
+        if bar is None:
+            for other in bars.values():
+                other.close()
+            bar = bars[stage] = tqdm(total=total, desc=stage, file=sys.stderr, disable=None, leave=False)
+        bar.total = total
+        bar.n = done
+        bar.refresh()
+
+    try:
+        if args.add:
+            if args.capture is None:
+                raise LirmUserError("lirm capture --add PHOTOS CAPTURE: name the capture folder to extend")
+            summary = add_to_capture(args.capture, source, config, progress=progress)
+        else:
+            if args.out is None:
+                raise LirmUserError("lirm capture PHOTOS -o CAPTURE: name the capture folder to create with -o")
+            summary = run_capture(source, args.out, config, progress=progress)
+    finally:
+        for bar in bars.values():
+            bar.close()
+    print(format_capture_report(summary, reference=args.reference))
+    return 0 if summary.usable else 1
+
+
 def _run_demo(args: argparse.Namespace) -> int:
     from .demo import run_demo
 
     result = run_demo(args.out, progress=lambda message: print(message, file=sys.stderr))
-    print(f"demo pictures are in {result.out_dir.resolve()}/")
+    print(f"demo output is in {result.out_dir.resolve()}/")
     print(f"  overview of every built-in object under every built-in environment: {result.overview}")
-    for env_name, folder in result.orbit_dirs.items():
-        print(f"  orbit under {env_name}: {folder}/beauty/ (and its G-buffer channels beside it)")
+    print(f"  synthetic photos: {result.photos}/ (true cameras and masks in {result.out_dir / 'truth'}/)")
+    print(f"  capture made from them: {result.capture}/ (capture.json, transforms.json, masks/, prepared/)")
+    a = result.accuracy
+    print(f"  posed {a.get('registered', '?')} photos", end="")
+    if "rotation_deg_median" in a:
+        print(f"; after a similarity alignment to the truth: rotation error median {a['rotation_deg_median']:.3f} deg, "
+              f"max {a['rotation_deg_max']:.3f} deg; camera-centre error median {100 * a['center_error_median']:.2f}%, "
+              f"max {100 * a['center_error_max']:.2f}% of the scene size", end="")
+    print()
+    if "mask_iou_mean" in a:
+        print(f"  automatic masks against the truth: IoU mean {a['mask_iou_mean']:.3f}, worst {a['mask_iou_min']:.3f}")
+    return 0
+
+
+def _run_bench_capture(args: argparse.Namespace) -> int:
+    from .bench.capture_bench import CaptureBenchConfig, run_capture_bench
+
+    if not args.photos.is_dir():
+        raise LirmUserError(f"{args.photos}: not a folder of photos")
+    try:
+        counts = tuple(int(s) for s in args.counts.split(","))
+    except ValueError:
+        raise LirmUserError(f"--counts must be comma-separated integers, got {args.counts!r}") from None
+    config = CaptureBenchConfig(args.photos, counts, args.max_side, args.masks)
+    result = run_capture_bench(config, progress=lambda message: print(message, file=sys.stderr))
+    print(result.table())
+    if args.json:
+        from .io.atomic_files import atomic_write_json
+
+        atomic_write_json(args.json, asdict(result))
     return 0
 
 

@@ -1,8 +1,11 @@
 """`lirm demo`: the main job on built-in data only (nothing to download).
 
-For now (issue 2) it renders the built-in procedural objects under the built-in environments:
-full orbits with every G-buffer channel for one object, and an overview sheet of all of them.
-Later issues grow this into the whole pipeline (capture, reconstruction, export).
+1. An overview sheet of the built-in objects under the built-in environments (the renderer).
+2. A synthetic photo shoot: a built-in object on a gravel floor under the built-in sky, photographed
+   from 16 orbit views and saved as JPEG photos, with the true cameras and masks kept aside.
+3. The whole capture pipeline on those photos as if a user had taken them (COLMAP posing,
+   normalisation, automatic masks, crops), and its pose and mask accuracy against the truth.
+Later issues grow this into reconstruction and export.
 """
 
 from __future__ import annotations
@@ -11,6 +14,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
+import cv2
 import numpy as np
 
 from lirm.renderer.context import create_headless_context
@@ -18,24 +22,28 @@ from lirm.renderer.pbr_renderer import PBRRenderer, RenderSettings
 from lirm.renderer.procedural_environments import PROCEDURAL_ENVIRONMENTS, make_procedural_environment
 
 from .assets.asset_source import resolve_asset
+from .io.atomic_files import atomic_write_bytes, atomic_write_json
 from .io.images import to_uint8, write_png
-from .orbit_render import OrbitRenderConfig, normalizing_transform, orbit_for, render_orbit
+from .orbit_render import OrbitRenderConfig, normalizing_transform, orbit_for
+from .synth.capture_scene import SyntheticCaptureConfig, render_synthetic_capture
 from .synth.procedural_objects import BUILTIN_OBJECTS
 
 
 @dataclass
 class DemoConfig:
-    orbit_object: str = BUILTIN_OBJECTS[0]
-    orbit: OrbitRenderConfig = field(default_factory=lambda: OrbitRenderConfig(views=8, width=512, height=512))
     overview_size: int = 256
     environment_width: int = 1024
+    shoot: SyntheticCaptureConfig = field(default_factory=SyntheticCaptureConfig)
+    shoot_environment: str = "sky"
 
 
 @dataclass
 class DemoResult:
     out_dir: Path
-    orbit_dirs: dict[str, Path]
     overview: Path
+    photos: Path
+    capture: Path
+    accuracy: dict
 
 
 def run_demo(out_dir: str | Path, config: DemoConfig = DemoConfig(), progress: Callable[[str], None] | None = None) -> DemoResult:
@@ -45,26 +53,71 @@ def run_demo(out_dir: str | Path, config: DemoConfig = DemoConfig(), progress: C
     renderer = PBRRenderer(ctx)
     try:
         environments = {name: make_procedural_environment(name, width=config.environment_width) for name in PROCEDURAL_ENVIRONMENTS}
-        orbit_dirs = {}
-        model = resolve_asset(config.orbit_object)
-        for env_name, env in environments.items():
-            target = out_dir / config.orbit_object / env_name
-            say(f"rendering {config.orbit.views} views of '{config.orbit_object}' under '{env_name}'")
-            render_orbit(renderer, model, env, config.orbit, target)
-            orbit_dirs[env_name] = target
         say(f"rendering the overview of {len(BUILTIN_OBJECTS)} objects x {len(environments)} environments")
         overview = _overview(renderer, environments, config, out_dir / "overview.png")
-        return DemoResult(out_dir, orbit_dirs, overview)
+        say(f"photographing the '{config.shoot.object_name}' from {config.shoot.views} views under '{config.shoot_environment}'")
+        shoot = render_synthetic_capture(renderer, environments[config.shoot_environment], config.shoot)
     finally:
         renderer.release()
         ctx.release()
+    photos = out_dir / "photos"
+    truth = out_dir / "truth"
+    for frame_id, image in shoot.images.items():
+        ok, jpeg = cv2.imencode(".jpg", cv2.cvtColor(image, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 95])
+        atomic_write_bytes(photos / f"shot_{frame_id}.jpg", jpeg.tobytes())
+        write_png(truth / "masks" / f"shot_{frame_id}.png", shoot.masks[frame_id])
+    atomic_write_json(truth / "transforms.json", {
+        "camera_model": "OPENCV",
+        "frames": [{"file_path": f"../photos/shot_{k}.jpg", **cam.to_dict()} for k, cam in sorted(shoot.cameras.items())],
+    })
+
+    say("running the capture pipeline on the photos (posing with COLMAP, masks, crops)")
+    from .capture.pipeline import run_capture
+
+    capture_dir = out_dir / "capture"
+    summary = run_capture(photos, capture_dir, progress=lambda stage, done, total: None)
+    accuracy = capture_accuracy(summary.capture, shoot.cameras, {f"shot_{k}": m for k, m in shoot.masks.items()})
+    accuracy["registered"] = f"{summary.registered}/{len(shoot.images)}"
+    return DemoResult(out_dir, overview, photos, capture_dir, accuracy)
+
+
+def capture_accuracy(capture, true_cameras: dict, true_masks_by_name: dict) -> dict:
+    """Pose errors after a similarity alignment, and mask IoU, matched by the photos' file names."""
+    from .capture.alignment import pose_errors
+    from .capture.undistort import undistort_image
+    from lirm.engine.cameras import Camera
+
+    by_name = {state.record.original.stem: fid for fid, state in capture.frames.items()}
+    truth_ids = {f"shot_{k}": k for k in true_cameras}
+    estimated, reference = {}, {}
+    for name, fid in by_name.items():
+        if fid in capture.cameras and name in truth_ids:
+            estimated[name] = capture.cameras[fid]
+            reference[name] = true_cameras[truth_ids[name]]
+    result = dict(pose_errors(estimated, reference)) if len(estimated) >= 3 else {}
+    source_cameras = capture.settings.get("source_cameras", {})
+    ious = {}
+    for name, fid in by_name.items():
+        mask = capture.read_mask(fid) if fid in capture.cameras else None
+        if mask is None or name not in true_masks_by_name:
+            continue
+        truth = true_masks_by_name[name]
+        if capture.frames[fid].pinhole_image is not None and fid in source_cameras:
+            truth, _ = undistort_image(truth, Camera.from_dict(source_cameras[fid]))  # compare in the same pixels
+        if truth.shape != mask.shape:
+            truth = cv2.resize(truth, mask.shape[::-1], interpolation=cv2.INTER_NEAREST)
+        a, b = mask > 127, truth > 127
+        ious[name] = float((a & b).sum() / max((a | b).sum(), 1))
+    if ious:
+        result["mask_iou_mean"] = float(np.mean(list(ious.values())))
+        result["mask_iou_min"] = float(np.min(list(ious.values())))
+    return result
 
 
 def _overview(renderer: PBRRenderer, environments: dict, config: DemoConfig, path: Path) -> Path:
     """One three-quarter view per object (rows) and environment (columns)."""
     s = config.overview_size
-    view = replace(config.orbit, views=1, width=s, height=s, start_azimuth_deg=-35.0)
-    camera = orbit_for(view)[0]
+    camera = orbit_for(OrbitRenderConfig(views=1, width=s, height=s, start_azimuth_deg=-35.0))[0]
     sheet = np.zeros((s * len(BUILTIN_OBJECTS), s * len(environments), 3), np.uint8)
     lightings = [renderer.prepare_lighting(env) for env in environments.values()]
     try:

@@ -80,6 +80,11 @@ class AutoMaskConfig:
     # Object points nearer than this fraction of `radius` to the origin become definite object
     # seeds; those further out (more likely the ground the object stands on) only shape the region.
     fg_seed_core: float = 0.8
+    # With points: the projection of a ball of this fraction of `radius` also starts as "probably
+    # object", so object parts without sparse points (a smooth handle) can win on colour; 0 keeps
+    # the points' region alone. Use it when normalisation sized the object reliably (the pipeline
+    # sets it when a support plane was found).
+    ball_probable_fraction: float = 0.0
     # Fewer object points than this in a view: seed it as in the no-points mode.
     min_fg_points: int = 8
     # No-points mode: the projection of a ball of this fraction of `radius` is "probably object".
@@ -186,7 +191,8 @@ class _Seeds:
     bg: np.ndarray  # points outside the ball and in front of it: definite background seeds
 
 
-def _project_seeds(level: _Level, points: np.ndarray, radius: float, cfg: AutoMaskConfig) -> _Seeds:
+def _project_seeds(level: _Level, points: np.ndarray, radius: float, cfg: AutoMaskConfig,
+                   is_object: np.ndarray | None = None) -> _Seeds:
     cam = level.camera
     empty = np.zeros((0, 2))
     if len(points) == 0:
@@ -198,10 +204,16 @@ def _project_seeds(level: _Level, points: np.ndarray, radius: float, cfg: AutoMa
     # A point outside the ball is only known to be visible background when it is nearer to the
     # camera than the ball; behind the ball the object may hide it.
     ball_near = np.linalg.norm(cam.center) - radius
+    background = on_img & ~inner & (z < ball_near)
+    if is_object is not None:
+        # Points inside the ball that are not the object (the table it stands on) are background
+        # where they lie nearer than the object's centre; farther ones may be hidden behind it.
+        background |= on_img & inner & ~is_object & (z < np.linalg.norm(cam.center))
+        inner = inner & is_object
     fg = xy[on_img & inner]
     if len(fg) < cfg.min_fg_points:
-        return _Seeds(empty, empty, xy[on_img & ~inner & (z < ball_near)])
-    return _Seeds(fg, xy[on_img & (norm <= cfg.fg_seed_core * radius)], xy[on_img & ~inner & (z < ball_near)])
+        return _Seeds(empty, empty, xy[background])
+    return _Seeds(fg, xy[on_img & inner & (norm <= cfg.fg_seed_core * radius)], xy[background])
 
 
 def _draw_seeds(tri: np.ndarray, seeds: _Seeds, level: _Level, cfg: AutoMaskConfig) -> None:
@@ -237,6 +249,8 @@ def _seed_trimap(view: _View, seeds: _Seeds, radius: float, cfg: AutoMaskConfig)
             ij = np.floor(seeds.fg).astype(np.int64)
             dots[ij[:, 1], ij[:, 0]] = 1
             region &= cv2.dilate(dots, _odd_kernel(cfg.seed_reach * long_side)) > 0
+        if cfg.ball_probable_fraction > 0:
+            region |= sphere_silhouette(cam, cfg.ball_probable_fraction * radius) > 0
     else:
         # No-points mode (or too few points here): a smaller ball stands for the object.
         region = sphere_silhouette(cam, cfg.no_points_fg_fraction * radius) > 0
@@ -343,13 +357,27 @@ def _refine_trimap(
     return tri
 
 
-def _trim_to_points(hull: VoxelHull, points: np.ndarray, radius: float, cfg: AutoMaskConfig) -> None:
+def _cut_below_plane(hull: VoxelHull, plane: tuple[np.ndarray, float]) -> None:
+    """Drop hull voxels under the support plane: no view sees under the table."""
+    normal, offset = np.asarray(plane[0], dtype=np.float64), float(plane[1])
+    idx = np.argwhere(hull.occupancy)
+    if len(idx) == 0:
+        return
+    below = idx[hull.centers_of(idx) @ normal - offset < 0.0]
+    hull.occupancy[below[:, 0], below[:, 1], below[:, 2]] = False
+
+
+def _trim_to_points(hull: VoxelHull, points: np.ndarray, radius: float, cfg: AutoMaskConfig,
+                    is_object: np.ndarray | None = None) -> None:
     """Drop hull voxels outside the convex hull of the object's sparse points, grown by a margin.
 
     Views that all look from one side (a capture of an object on a table) cannot carve what is
     hidden behind the object, e.g. the space under it; the points bound the object there.
     """
-    inner = points[np.linalg.norm(points, axis=1) <= radius]
+    keep = np.linalg.norm(points, axis=1) <= radius
+    if is_object is not None:
+        keep &= is_object
+    inner = points[keep]
     if cfg.point_hull_margin < 0 or len(inner) < max(cfg.min_fg_points, 4) or hull.is_empty:
         return
     try:
@@ -390,17 +418,28 @@ def automatic_masks(
     radius: float = 1.0,
     config: AutoMaskConfig = AutoMaskConfig(),
     progress: Callable[[int, int], None] | None = None,
+    point_is_object: np.ndarray | None = None,
+    support_plane: tuple[np.ndarray, float] | None = None,
 ) -> dict[str, np.ndarray]:
     """Object masks (uint8, 255 = object, full image size) for every frame in both dicts.
 
     images: frame id -> RGB uint8 photo at its camera's size. points: (N, 3) sparse SfM points in
-    the normalised world, or None / empty for the no-points mode. radius: the object lies inside
+    the normalised world, or None / empty for the no-points mode. point_is_object: optional (N,)
+    booleans from normalisation (False for the support plane's points); without it every point
+    inside the ball counts as object. support_plane: optional (unit normal, offset) of the surface
+    the object stands on (n . x = offset, normal toward the cameras); the hull is cut there instead
+    of at the points' convex hull, which would also cut object parts that carry few points (a
+    smooth handle). radius: the object lies inside
     this ball around the origin. progress(done, total) is called after each step of each view;
     raise from it to cancel. See the module docstring for the method and AutoMaskConfig for knobs.
     """
     cfg = config
     pts = np.zeros((0, 3)) if points is None else np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    labels = None if point_is_object is None else np.asarray(point_is_object, dtype=bool).reshape(-1)
+    finite = np.all(np.isfinite(pts), axis=1)
+    pts = pts[finite]
+    if labels is not None:
+        labels = labels[finite]
     frames = [f for f in images if f in cameras]
     use_hull = cfg.consistency_passes > 0 and len(frames) >= 3
     refinements = max(cfg.consistency_passes, 1) if use_hull else 1
@@ -421,7 +460,7 @@ def automatic_masks(
             raise ValueError(f"frame {f!r}: expected an RGB uint8 image, got {img.dtype} {img.shape}")
         view = _prepare_view(f, np.ascontiguousarray(img[:, :, :3]), cameras[f], radius, cfg)
         views[f] = view
-        seeds = _project_seeds(view.seed, pts, radius, cfg)
+        seeds = _project_seeds(view.seed, pts, radius, cfg, labels)
         res = _grabcut(view.seed.image, _seed_trimap(view, seeds, radius, cfg), cfg.seed_iterations, cfg)
         if res is None:
             masks[f] = np.zeros(view.seed.image.shape[:2], bool)
@@ -445,7 +484,10 @@ def automatic_masks(
                     resolution=cfg.hull_resolution, min_views_fraction=cfg.hull_min_views_fraction,
                     within_sphere=True,
                 )
-                _trim_to_points(hull, pts, radius, cfg)
+                if support_plane is not None:
+                    _cut_below_plane(hull, support_plane)
+                else:
+                    _trim_to_points(hull, pts, radius, cfg, labels)
                 if hull.is_empty:
                     hull = None
         for f in frames:
@@ -455,7 +497,7 @@ def automatic_masks(
                 m = cv2.resize(m.astype(np.uint8), (work.camera.width, work.camera.height),
                                interpolation=cv2.INTER_LINEAR) > 0
             hull_mask = None if hull is None else project_hull(hull, work.camera)
-            tri = _refine_trimap(work, m, hull_mask, _project_seeds(work, pts, radius, cfg), cfg)
+            tri = _refine_trimap(work, m, hull_mask, _project_seeds(work, pts, radius, cfg, labels), cfg)
             res = _grabcut(work.image, tri, cfg.refine_iterations, cfg, models.get(f))
             if res is not None:
                 m = clean_mask(res[0], cfg.min_component_fraction, cfg.max_hole_fraction)

@@ -3,7 +3,11 @@
 Object at the origin, inside the sphere of radius R (DESIGN.md §3), +Z up. From:
 - up: the cameras' average up vector (a photographer holds the camera roughly upright),
 - centre: where the optical axes converge (least squares), refined by the sparse points near it,
-- radius: a high percentile of those points' distances (the object), with a margin,
+- support plane: most objects stand on a table or floor, whose sparse points would otherwise
+  count as object (the radius would cover the floor and the masks would swallow it), so a
+  RANSAC plane roughly perpendicular to up is found and its points (and those below it) are set
+  aside as background,
+- radius: a high percentile of the remaining points' distances (the object), with a margin,
 - heading: turned about +Z so the first camera looks along +Y, i.e. sees the object's front as the
   renderer's orbit azimuth 0 does.
 The transform (source world -> normalised world, a similarity) is kept so exports can undo it.
@@ -25,6 +29,10 @@ class NormalizeConfig:
     core_fraction: float = 0.6  # sparse points within this fraction of the median camera distance count as object
     radius_percentile: float = 95.0
     min_points: int = 20
+    plane_max_tilt_deg: float = 25.0  # the support plane's normal is within this of the cameras' up
+    plane_tolerance: float = 0.01  # inlier distance, as a fraction of the median camera distance
+    plane_min_fraction: float = 0.2  # of the points near the object, for a plane to count
+    plane_iterations: int = 300
 
 
 @dataclass
@@ -34,6 +42,8 @@ class Normalization:
     radius_source: float  # estimated object radius in source units
     up_source: np.ndarray  # unit up direction in the source frame
     used_points: int  # sparse points that informed centre and radius (0 = cameras only)
+    # The support plane in the normalised world as (unit normal, offset): n . x = offset; None if none.
+    plane: tuple[np.ndarray, float] | None = None
 
     @property
     def scale(self) -> float:
@@ -55,12 +65,24 @@ class Normalization:
             "radius_source": self.radius_source,
             "up_source": self.up_source.tolist(),
             "used_points": self.used_points,
+            "plane": None if self.plane is None else [self.plane[0].tolist(), self.plane[1]],
         }
 
     @classmethod
     def from_dict(cls, d: dict) -> "Normalization":
+        plane = d.get("plane")
         return cls(np.array(d["world_from_source"], dtype=np.float64), np.array(d["center_source"], dtype=np.float64),
-                   float(d["radius_source"]), np.array(d["up_source"], dtype=np.float64), int(d["used_points"]))
+                   float(d["radius_source"]), np.array(d["up_source"], dtype=np.float64), int(d["used_points"]),
+                   None if plane is None else (np.array(plane[0], dtype=np.float64), float(plane[1])))
+
+    def object_point_mask(self, points_world: np.ndarray, radius: float) -> np.ndarray:
+        """Which (normalised) points belong to the object: inside `radius` and above the support plane."""
+        p = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
+        keep = np.linalg.norm(p, axis=1) < radius
+        if self.plane is not None:
+            normal, offset = self.plane
+            keep &= p @ normal - offset > 0.0
+        return keep
 
 
 def axes_convergence(cameras: list[Camera]) -> np.ndarray:
@@ -105,14 +127,23 @@ def estimate_normalization(cameras: dict[str, Camera], points: np.ndarray | None
 
     used = 0
     radius = None
+    plane_source = None
     if points is not None and len(points) >= config.min_points:
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         near = p[np.linalg.norm(p - center, axis=1) < config.core_fraction * camera_distance]
+        plane_source = find_support_plane(near, up, config.plane_tolerance * camera_distance, config)
+        if plane_source is not None:
+            normal, offset = plane_source
+            # Off the plane by more than twice the tolerance, on the cameras' side.
+            near = near[near @ normal - offset > 2.0 * config.plane_tolerance * camera_distance]
         if len(near) >= config.min_points:
-            # Centre = middle of the robust extent of the object points, in an up-aligned frame.
-            lo, hi = np.percentile(near, 5, axis=0), np.percentile(near, 95, axis=0)
-            center = (lo + hi) / 2.0
-            radius = float(np.percentile(np.linalg.norm(near - center, axis=1), config.radius_percentile))
+            if plane_source is not None:
+                center, radius = _object_on_plane(near, plane_source, config)
+            else:
+                # Centre = middle of the robust extent of the object points.
+                lo, hi = np.percentile(near, 5, axis=0), np.percentile(near, 95, axis=0)
+                center = (lo + hi) / 2.0
+                radius = float(np.percentile(np.linalg.norm(near - center, axis=1), config.radius_percentile))
             used = len(near)
     if radius is None or radius <= 0:
         # Cameras only: assume the object fills about half of the narrowest field of view.
@@ -129,7 +160,59 @@ def estimate_normalization(cameras: dict[str, Camera], points: np.ndarray | None
     transform = np.eye(4)
     transform[:3, :3] = scale * rotation
     transform[:3, 3] = -scale * rotation @ center
-    return Normalization(transform, np.asarray(center, dtype=np.float64), float(radius), up, used)
+    plane = None
+    if plane_source is not None:
+        normal, offset = plane_source
+        point_on_plane = normal * offset
+        plane = (rotation @ normal, float((rotation @ normal) @ (transform[:3, :3] @ point_on_plane + transform[:3, 3])))
+    return Normalization(transform, np.asarray(center, dtype=np.float64), float(radius), up, used, plane)
+
+
+def _object_on_plane(points: np.ndarray, plane: tuple[np.ndarray, float], config: NormalizeConfig) -> tuple[np.ndarray, float]:
+    """An object standing on the plane reaches down to it, however few points its base has: the
+    centre sits half-way between the plane and the object's top, the radius covers both."""
+    normal, offset = plane
+    heights = points @ normal - offset
+    top = float(np.percentile(heights, 98))
+    flat = points - np.outer(heights, normal)  # feet on the plane
+    lo, hi = np.percentile(flat, 5, axis=0), np.percentile(flat, 95, axis=0)
+    foot = (lo + hi) / 2.0
+    foot -= ((foot @ normal) - offset) * normal  # back onto the plane exactly
+    center = foot + normal * (top / 2.0)
+    radius = max(float(np.percentile(np.linalg.norm(points - center, axis=1), config.radius_percentile)), top / 2.0)
+    return center, radius
+
+
+def find_support_plane(points: np.ndarray, up: np.ndarray, tolerance: float, config: NormalizeConfig,
+                       seed: int = 0) -> tuple[np.ndarray, float] | None:
+    """The largest plane roughly perpendicular to `up` among `points` (RANSAC, then a least-squares
+    refit), as (unit normal pointing along up, offset). None when no plane holds enough points."""
+    if len(points) < max(config.min_points, 3):
+        return None
+    rng = np.random.default_rng(seed)
+    max_tilt = np.cos(np.deg2rad(config.plane_max_tilt_deg))
+    best, best_count = None, 0
+    for _ in range(config.plane_iterations):
+        a, b, c = points[rng.choice(len(points), 3, replace=False)]
+        n = np.cross(b - a, c - a)
+        length = np.linalg.norm(n)
+        if length < 1e-12:
+            continue
+        n /= length
+        if abs(n @ up) < max_tilt:
+            continue
+        inliers = np.abs((points - a) @ n) < tolerance
+        count = int(inliers.sum())
+        if count > best_count:
+            best, best_count = inliers, count
+    if best is None or best_count < config.plane_min_fraction * len(points):
+        return None
+    q = points[best]
+    centroid = q.mean(axis=0)
+    normal = np.linalg.svd(q - centroid)[2][-1]
+    if normal @ up < 0:
+        normal = -normal
+    return normal, float(normal @ centroid)
 
 
 def _rotation_up_to_z(up: np.ndarray) -> np.ndarray:

@@ -78,3 +78,23 @@ def test_single_camera_and_parallel_cameras_do_not_crash():
     shifted = c.c2w.copy()
     shifted[0, 3] += 0.5
     estimate_normalization({"a": c, "b": c.with_pose(shifted)}, None)
+
+
+def test_a_floor_under_the_object_is_set_aside():
+    """A tabletop capture: most sparse points lie on the floor around the object. They must not
+    inflate the object's radius, and the floor is kept as the support plane."""
+    frame = _random_similarity(7)
+    cams, pts = _capture_in(frame)
+    rng = np.random.default_rng(1)
+    floor = np.column_stack([rng.uniform(-1.5, 1.5, 3000), rng.uniform(-1.5, 1.5, 3000), np.full(3000, -0.5)])
+    floor += rng.normal(0, 0.002, floor.shape)
+    floor_src = floor @ frame[:3, :3].T + frame[:3, 3]
+    norm = estimate_normalization(cams, np.concatenate([pts, floor_src]))
+    object_points = norm.apply_to_points(pts[:500])
+    assert np.percentile(np.linalg.norm(object_points, axis=1), 95) == pytest.approx(0.85, rel=0.15)
+    normal, offset = norm.plane
+    assert normal[2] > 0.99
+    floor_world = norm.apply_to_points(floor_src)
+    np.testing.assert_allclose(floor_world @ normal - offset, 0.0, atol=0.02)
+    keep = norm.object_point_mask(np.concatenate([object_points, floor_world]), radius=1.0)
+    assert keep[:500].mean() > 0.4 and keep[500:].mean() < 0.05  # the floor is background

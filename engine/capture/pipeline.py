@@ -1,0 +1,310 @@
+"""The capture pipeline: ingest -> pose -> undistort -> normalise -> mask -> crop, with progress,
+cancel and resumption. `lirm capture`, the demo and (later) the app all call these functions.
+
+Each stage records its result in the capture folder before the next starts, so an interrupted run
+reopens where it stopped (`resume_capture`). Frames keep their ids through every stage and through
+`add_to_capture`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from lirm.engine.errors import LirmUserError
+from lirm.engine.io.images import write_png
+
+from .auto_mask import AutoMaskConfig, automatic_masks
+from .capture_folder import Capture, FrameState
+from .colmap_posing import ColmapConfig, extend_colmap_pose, pose_with_colmap
+from .crop import CropConfig, EmptyMaskError, prepare_view
+from .ingest import Cancelled, IngestConfig, ingest_photos
+from .masks import check_mask, load_user_masks, mask_from_alpha
+from .normalize import NormalizeConfig, estimate_normalization
+from .pose_import import import_colmap_model, import_transforms_json
+from .records import FileReport, ImageRecord, PosingResult
+from .undistort import undistort_image
+from .video_frames import VideoConfig, select_video_frames
+
+VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".webm", ".m4v")
+STAGES = ("ingest", "pose", "normalize", "masks", "crops")
+
+Progress = Callable[[str, int, int], None]  # (stage, done, total)
+
+
+@dataclass
+class CaptureConfig:
+    ingest: IngestConfig = field(default_factory=IngestConfig)
+    video: VideoConfig = field(default_factory=VideoConfig)
+    colmap: ColmapConfig = field(default_factory=ColmapConfig)
+    normalize: NormalizeConfig = field(default_factory=NormalizeConfig)
+    auto_mask: AutoMaskConfig = field(default_factory=AutoMaskConfig)
+    crop: CropConfig = field(default_factory=CropConfig)
+    masks: str = "auto"  # auto (alpha where every image has it, else automatic) | alpha | automatic | a folder
+    poses: str | None = None  # a transforms.json or COLMAP model folder to use instead of structure from motion
+
+
+@dataclass
+class CaptureSummary:
+    capture: Capture
+    accepted: int
+    skipped: int
+    registered: int
+    masked: int
+    prepared: int
+
+    @property
+    def usable(self) -> bool:
+        return self.registered > 0
+
+
+def run_capture(inputs: str | Path | int, out: str | Path, config: CaptureConfig = CaptureConfig(),
+                progress: Progress | None = None, cancel: Callable[[], bool] | None = None) -> CaptureSummary:
+    """Create a capture from a folder of photos, a video file or a camera index."""
+    capture = Capture.create(out, settings=_settings(config))
+    capture.settings["inputs"] = str(inputs)
+    _ingest(capture, inputs, config, progress, cancel)
+    return _finish(capture, config, progress, cancel, new_frames=None)
+
+
+def resume_capture(root: str | Path, config: CaptureConfig = CaptureConfig(), progress: Progress | None = None,
+                   cancel: Callable[[], bool] | None = None) -> CaptureSummary:
+    """Run whatever stages an interrupted capture had not finished."""
+    capture = Capture.open(root)
+    return _finish(capture, config, progress, cancel, new_frames=None)
+
+
+def add_to_capture(root: str | Path, inputs: str | Path | int, config: CaptureConfig = CaptureConfig(),
+                   progress: Progress | None = None, cancel: Callable[[], bool] | None = None) -> CaptureSummary:
+    """Ingest more photos into a capture and pose, mask and crop them; old frames keep their ids."""
+    capture = Capture.open(root)
+    before = set(capture.frames)
+    _ingest(capture, inputs, config, progress, cancel)
+    new = sorted(set(capture.frames) - before)
+    if not new:
+        capture.log("add", added=0)
+        capture.save()
+        return _summary(capture)
+    capture.settings.pop("completed", None)
+    return _finish(capture, config, progress, cancel, new_frames=new)
+
+
+# ---- stages ---------------------------------------------------------------------------------------
+def _ingest(capture: Capture, inputs, config: CaptureConfig, progress, cancel) -> None:
+    start = time.perf_counter()
+    existing = capture.records
+    stage_progress = _stage(progress, "ingest")
+    if isinstance(inputs, int) or Path(inputs).suffix.lower() in VIDEO_SUFFIXES:
+        records, reports = select_video_frames(inputs, capture.root, config.video, existing=existing, progress=stage_progress, cancel=cancel)
+    else:
+        path = Path(inputs)
+        if not path.exists():
+            raise LirmUserError(f"{path}: no such folder, photo or video")
+        records, reports = ingest_photos(path, capture.root, config.ingest, existing=existing, progress=stage_progress, cancel=cancel)
+    for record in records:
+        capture.frames[record.frame_id] = FrameState(record)
+    capture.reports.extend(reports)
+    capture.log("ingest", inputs=str(inputs), accepted=len(records), skipped=sum(not r.accepted for r in reports))
+    capture.settings.setdefault("timings", {})["ingest"] = round(time.perf_counter() - start, 3)
+    capture.save()
+
+
+def _finish(capture: Capture, config: CaptureConfig, progress, cancel, new_frames: list[str] | None) -> CaptureSummary:
+    if not capture.frames:
+        capture.save()
+        return _summary(capture)
+    completed = capture.settings.get("completed", [])
+    if "pose" not in completed or new_frames:
+        _timed(capture, "pose", lambda: _pose(capture, config, progress, cancel, new_frames))
+    if not capture.cameras:
+        capture.log("stopped", reason="no photo could be posed")
+        capture.save()
+        return _summary(capture)
+    for stage, run in (("normalize", lambda: _normalize(capture, config)),
+                       ("masks", lambda: _masks(capture, config, progress, cancel)),
+                       ("crops", lambda: _crops(capture, config, progress, cancel))):
+        if stage not in capture.settings.get("completed", []) or new_frames:
+            _timed(capture, stage, run)
+    return _summary(capture)
+
+
+def _timed(capture: Capture, stage: str, run: Callable[[], None]) -> None:
+    """Run a stage, then record its wall time (capture.settings["timings"]) and mark it complete."""
+    start = time.perf_counter()
+    run()
+    capture.settings.setdefault("timings", {})[stage] = round(time.perf_counter() - start, 3)
+    _mark(capture, stage)
+
+
+def _pose(capture: Capture, config: CaptureConfig, progress, cancel, new_frames) -> None:
+    records = capture.records
+    if config.poses:
+        path = Path(config.poses)
+        result = import_transforms_json(path, records) if path.is_file() else import_colmap_model(path, records)
+    else:
+        work = capture.root / "colmap"
+        pose_progress = (lambda stage, done, total: progress(f"pose: {stage}", done, total)) if progress else None
+        if new_frames and (work / "sparse").exists():
+            new_records = [capture.frames[f].record for f in new_frames]
+            result = extend_colmap_pose(work, new_records, capture.root, config=config.colmap, progress=pose_progress, cancel=cancel)
+        else:
+            result = pose_with_colmap(records, capture.root, work, config=config.colmap, progress=pose_progress, cancel=cancel)
+    _apply_posing(capture, result)
+    if new_frames:  # a new structure-from-motion frame: normalise again
+        capture.settings["completed"] = [s for s in capture.settings.get("completed", []) if s == "pose"]
+    capture.log("pose", source=result.source, registered=len(result.cameras), total=len(records))
+    capture.save()
+
+
+def _apply_posing(capture: Capture, result: PosingResult) -> None:
+    capture.settings["pose_source"] = result.source
+    raw = {}
+    for frame_id, state in capture.frames.items():
+        state.pose_status = result.status.get(frame_id, "not posed")
+    for frame_id, camera in result.cameras.items():
+        if frame_id in capture.frames:
+            raw[frame_id] = camera
+            capture.frames[frame_id].pose_status = "registered"
+    capture.settings["source_cameras"] = {k: v.to_dict() for k, v in raw.items()}
+    capture.cameras = raw  # source frame until normalised
+    capture.points = np.asarray(result.points, dtype=np.float64).reshape(-1, 3)
+    capture.settings["normalized"] = False
+
+
+def _normalize(capture: Capture, config: CaptureConfig) -> None:
+    from lirm.engine.cameras import Camera
+
+    source = {k: Camera.from_dict(v) for k, v in capture.settings.get("source_cameras", {}).items()}
+    norm = estimate_normalization(source, capture.points if len(capture.points) else None, config.normalize)
+    capture.normalization = norm
+    capture.cameras = {k: norm.apply_to_camera(c) for k, c in source.items()}
+    capture.points = norm.apply_to_points(capture.points) if len(capture.points) else capture.points
+    capture.settings["normalized"] = True
+    # Pinhole working images for every later stage (see undistort.py).
+    for frame_id, camera in list(capture.cameras.items()):
+        capture.frames[frame_id].pinhole_image = None
+        if camera.distortion is not None:
+            image, pinhole = undistort_image(capture.read_image(frame_id, pinhole=False), camera)
+            rel = Path("undistorted") / f"{frame_id}.png"
+            write_png(capture.root / rel, image)
+            capture.frames[frame_id].pinhole_image = rel
+            capture.cameras[frame_id] = pinhole
+    capture.log("normalize", radius_source=norm.radius_source, used_points=norm.used_points)
+    capture.save()
+
+
+def _masks(capture: Capture, config: CaptureConfig, progress, cancel) -> None:
+    posed = sorted(capture.cameras)
+    images = {f: capture.read_image(f) for f in posed}
+    mode = config.masks
+    if mode == "auto":
+        mode = "alpha" if all(images[f].shape[2] == 4 for f in posed) else "automatic"
+    if mode == "alpha":
+        missing = [f for f in posed if images[f].shape[2] != 4]
+        if missing:
+            raise LirmUserError(f"--masks alpha: {len(missing)} photos have no alpha channel (e.g. "
+                                f"{capture.frames[missing[0]].record.original.name}); use --masks auto or a mask folder")
+        masks = {f: mask_from_alpha(images[f]) for f in posed}
+        source = "alpha"
+    elif mode == "automatic":
+        rgb = {f: images[f][:, :, :3] for f in posed}
+        radius = config.normalize.target_radius
+        is_object = None
+        mask_config = config.auto_mask
+        if capture.normalization is not None and len(capture.points):
+            is_object = capture.normalization.object_point_mask(capture.points, radius)
+            if capture.normalization.plane is not None and mask_config.ball_probable_fraction == 0:
+                # The object was sized from points above a known floor: its ball is a good prior.
+                mask_config = replace(mask_config, ball_probable_fraction=config.normalize.fill)
+        masks = automatic_masks(rgb, {f: capture.cameras[f] for f in posed}, capture.points, radius=radius,
+                                config=mask_config, progress=_stage(progress, "masks"), point_is_object=is_object,
+                                support_plane=None if capture.normalization is None else capture.normalization.plane)
+        source = "auto"
+    else:
+        folder = Path(mode)
+        names = {f: capture.frames[f].record.original.name for f in posed}
+        sizes = {f: (capture.cameras[f].width, capture.cameras[f].height) for f in posed}
+        masks, reports = load_user_masks(folder, names, sizes=sizes)
+        capture.reports.extend(reports)
+        source = "user"
+    for f in posed:
+        if _cancelled(cancel):
+            raise Cancelled("cancelled while writing masks")
+        if f not in masks:
+            capture.frames[f].mask_status = "no mask"
+            continue
+        problem = check_mask(masks[f])
+        capture.write_mask(f, masks[f], source=source, status=problem or "ok")
+    capture.log("masks", source=source, ok=sum(capture.frames[f].mask_status == "ok" for f in posed))
+    capture.save()
+
+
+def _crops(capture: Capture, config: CaptureConfig, progress, cancel) -> None:
+    posed = sorted(capture.cameras)
+    done = 0
+    for f in posed:
+        if _cancelled(cancel):
+            raise Cancelled("cancelled while cropping")
+        mask = capture.read_mask(f)
+        state = capture.frames[f]
+        if mask is None or state.mask_status != "ok":
+            continue
+        try:
+            view = prepare_view(f, capture.read_image(f)[:, :, :3], mask, capture.cameras[f], config.crop)
+        except EmptyMaskError:
+            state.mask_status = "empty"
+            continue
+        capture.write_prepared(view)
+        done += 1
+        if progress:
+            progress("crops", done, len(posed))
+    capture.log("crops", prepared=done, size=config.crop.size)
+    capture.save()
+
+
+# ---- helpers --------------------------------------------------------------------------------------
+def _mark(capture: Capture, stage: str) -> None:
+    completed = capture.settings.setdefault("completed", [])
+    if stage not in completed:
+        completed.append(stage)
+    capture.save()
+
+
+def _summary(capture: Capture) -> CaptureSummary:
+    frames = capture.frames.values()
+    return CaptureSummary(
+        capture=capture,
+        accepted=len(capture.frames),
+        skipped=sum(not r.accepted for r in capture.reports),
+        registered=len(capture.cameras),
+        masked=sum(s.mask_status == "ok" for s in frames),
+        prepared=sum(capture.prepared_path(f).exists() for f in capture.cameras),
+    )
+
+
+def _stage(progress: Progress | None, name: str):
+    return (lambda done, total: progress(name, done, total)) if progress else None
+
+
+def _cancelled(cancel) -> bool:
+    return bool(cancel and cancel())
+
+
+def _settings(config: CaptureConfig) -> dict:
+    return {"config": _jsonable(asdict(config))}
+
+
+def _jsonable(value):
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    return value

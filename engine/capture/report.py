@@ -1,0 +1,48 @@
+"""What the user is told after a capture: per file, per frame, and what to do next."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .pipeline import CaptureSummary
+
+
+def format_capture_report(summary: CaptureSummary, reference: Path | None = None) -> str:
+    capture = summary.capture
+    lines = [f"capture: {capture.root}"]
+    skipped = [r for r in capture.reports if not r.accepted]
+    lines.append(f"  photos accepted: {summary.accepted}, skipped: {len(skipped)}")
+    for r in skipped:
+        lines.append(f"    skipped {Path(r.path).name}: {r.reason}")
+    lines.append(f"  posed: {summary.registered} of {summary.accepted} ({capture.settings.get('pose_source', 'not posed')})")
+    for frame_id, state in sorted(capture.frames.items()):
+        if state.pose_status != "registered":
+            lines.append(f"    {state.record.original.name} ({frame_id}): {state.pose_status}")
+    lines.append(f"  masks ok: {summary.masked} of {summary.registered}")
+    for frame_id, state in sorted(capture.frames.items()):
+        if frame_id in capture.cameras and state.mask_status != "ok":
+            lines.append(f"    {state.record.original.name} ({frame_id}): mask {state.mask_status}")
+    lines.append(f"  network views prepared: {summary.prepared}")
+    timings = capture.settings.get("timings", {})
+    if timings:
+        lines.append("  seconds: " + ", ".join(f"{k} {v:.1f}" for k, v in timings.items()))
+    if reference is not None and summary.registered:
+        lines.append(_reference_errors(capture, reference))
+    if not summary.usable:
+        lines.append("  nothing could be posed: take photos with more overlap (about 20-30 degrees between shots), "
+                     "more texture in view, or pass known poses with --poses")
+    elif summary.registered < summary.accepted:
+        lines.append("  the photos that did not register can be retaken or removed; the capture is usable without them")
+    return "\n".join(lines)
+
+
+def _reference_errors(capture, reference: Path) -> str:
+    from .alignment import pose_errors
+    from .pose_import import import_transforms_json
+
+    truth = import_transforms_json(reference, capture.records)
+    e = pose_errors(capture.cameras, truth.cameras)
+    return (f"  against {reference} ({e['num_frames']} frames, after a similarity alignment): rotation error median "
+            f"{e['rotation_deg_median']:.3f} deg, max {e['rotation_deg_max']:.3f} deg; camera-centre error median "
+            f"{100 * e['center_error_median']:.2f}%, max {100 * e['center_error_max']:.2f}% of the scene size; "
+            f"focal ratio {e['focal_ratio']:.4f}")

@@ -1,0 +1,143 @@
+"""The capture pipeline end to end through `lirm capture`: real photos, bad input, imported poses,
+adding photos, and resuming an interrupted capture."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from lirm.engine.capture.capture_folder import Capture
+from lirm.engine.capture.pipeline import CaptureConfig, resume_capture, run_capture
+from lirm.engine.cli import main
+
+
+def _hashes(folder: Path) -> dict[str, str]:
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.iterdir())}
+
+
+def _fox(shared_data: Path, n: int, start: int = 0) -> list[Path]:
+    return sorted((shared_data / "real_instantngp_fox" / "images").glob("*.jpg"))[start:start + n]
+
+
+@pytest.fixture(scope="module")
+def messy_folder(tmp_path_factory, shared_data) -> Path:
+    """10 fox photos + 3 cake frames (an unrelated object) + a corrupt JPEG, a text file named .jpg,
+    a 1x1 image and a byte-identical duplicate."""
+    folder = tmp_path_factory.mktemp("messy")
+    for p in _fox(shared_data, 10, start=0):
+        shutil.copy(p, folder / p.name)
+    for p in sorted((shared_data / "real_vggsfm_cake" / "images").glob("*.jpg"))[:3]:
+        if p.suffix.lower() in (".jpg", ".png"):
+            shutil.copy(p, folder / f"cake_{p.name}")
+    data = _fox(shared_data, 1, start=20)[0].read_bytes()
+    (folder / "corrupt.jpg").write_bytes(data[: len(data) // 3])
+    (folder / "notes.jpg").write_text("this is not a photo")
+    cv2.imwrite(str(folder / "tiny.png"), np.zeros((1, 1, 3), np.uint8))
+    shutil.copy(folder / _fox(shared_data, 1)[0].name, folder / "copy_of_first.jpg")
+    return folder
+
+
+@pytest.mark.slow
+def test_messy_folder_gives_a_report_and_a_usable_capture(messy_folder, tmp_path, capsys):
+    before = _hashes(messy_folder)
+    out = tmp_path / "capture"
+    code = main(["capture", str(messy_folder), "-o", str(out), "--max-side", "640", "--masks", "automatic", "--size", "64"])
+    report = capsys.readouterr().out
+    assert code == 0, report
+    assert _hashes(messy_folder) == before  # the user's folder is byte-for-byte unchanged
+    for name in ("corrupt.jpg", "notes.jpg", "tiny.png", "copy_of_first.jpg"):
+        assert f"skipped {name}" in report, report
+    capture = Capture.open(out)
+    fox_ids = [f for f, s in capture.frames.items() if not s.record.original.name.startswith("cake")]
+    cake_ids = [f for f, s in capture.frames.items() if s.record.original.name.startswith("cake")]
+    assert len(fox_ids) == 10 and cake_ids
+    assert sum(capture.frames[f].pose_status == "registered" for f in fox_ids) >= 9
+    for f in cake_ids:  # the unrelated object is reported, not silently dropped
+        assert capture.frames[f].pose_status != "registered"
+        assert capture.frames[f].record.original.name in report
+    assert len(list((out / "prepared").glob("*.npz"))) >= 1
+    transforms = json.loads((out / "transforms.json").read_text())
+    assert len(transforms["frames"]) == len(capture.cameras)
+    # Normalised: cameras around the origin, +Z roughly their average up.
+    ups = np.mean([c.up for c in capture.cameras.values()], axis=0)
+    assert ups[2] / np.linalg.norm(ups) > 0.99
+
+
+def test_nothing_posable_exits_non_zero(tmp_path, capsys, shared_data):
+    folder = tmp_path / "junk"
+    folder.mkdir()
+    (folder / "a.jpg").write_text("not a photo")
+    cv2.imwrite(str(folder / "b.png"), np.zeros((1, 1, 3), np.uint8))
+    code = main(["capture", str(folder), "-o", str(tmp_path / "capture")])
+    out = capsys.readouterr().out
+    assert code == 1
+    assert "nothing could be posed" in out and "skipped a.jpg" in out
+
+
+def test_imported_poses_and_alpha_masks(tmp_path, shared_data):
+    lego = shared_data / "synth_nerf_lego_train"
+    folder = tmp_path / "lego"
+    folder.mkdir()
+    for i in range(0, 24, 2):
+        shutil.copy(lego / "train" / f"r_{i}.png", folder / f"r_{i}.png")
+    config = CaptureConfig(masks="alpha", poses=str(lego / "transforms_train.json"))
+    summary = run_capture(folder, tmp_path / "capture", config)
+    assert summary.registered == 12 and summary.masked == 12 and summary.prepared == 12
+    capture = summary.capture
+    view = capture.read_prepared(sorted(capture.cameras)[0])
+    assert view.image_masked.shape == (256, 256, 3) and view.plucker.shape == (256, 256, 6)
+    # The crop's mask is the alpha, and its rays are unit directions.
+    assert 0.1 < view.mask.mean() < 0.9
+    np.testing.assert_allclose(np.linalg.norm(view.plucker[..., :3], axis=-1), 1.0, atol=1e-5)
+    # Normalisation put the lego's centre near the origin and its cameras outside radius 1.
+    assert all(np.linalg.norm(c.center) > 1.0 for c in capture.cameras.values())
+
+
+def test_an_interrupted_capture_resumes(tmp_path, shared_data):
+    lego = shared_data / "synth_nerf_lego_train"
+    folder = tmp_path / "lego"
+    folder.mkdir()
+    for i in range(6):
+        shutil.copy(lego / "train" / f"r_{i}.png", folder / f"r_{i}.png")
+    config = CaptureConfig(masks="alpha", poses=str(lego / "transforms_train.json"))
+    calls = {"n": 0}
+
+    def cancel_during_crops() -> bool:
+        calls["n"] += 1
+        return Capture.open(tmp_path / "capture").settings.get("completed", [])[-1:] == ["masks"]
+
+    from lirm.engine.capture.ingest import Cancelled
+
+    with pytest.raises(Cancelled):
+        run_capture(folder, tmp_path / "capture", config, cancel=cancel_during_crops)
+    reopened = Capture.open(tmp_path / "capture")
+    assert "masks" in reopened.settings["completed"] and "crops" not in reopened.settings["completed"]
+    summary = resume_capture(tmp_path / "capture", config)
+    assert summary.prepared == 6
+
+
+@pytest.mark.slow
+def test_adding_photos_keeps_old_frames(tmp_path, capsys, shared_data):
+    first, more = tmp_path / "first", tmp_path / "more"
+    first.mkdir()
+    more.mkdir()
+    for p in _fox(shared_data, 10):
+        shutil.copy(p, first / p.name)
+    for p in _fox(shared_data, 3, start=10):
+        shutil.copy(p, more / p.name)
+    out = tmp_path / "capture"
+    assert main(["capture", str(first), "-o", str(out), "--max-side", "640", "--masks", "automatic", "--size", "64"]) == 0
+    old = Capture.open(out)
+    old_names = {f: s.record.original.name for f, s in old.frames.items()}
+    assert main(["capture", "--add", str(more), str(out), "--max-side", "640", "--masks", "automatic", "--size", "64"]) == 0
+    new = Capture.open(out)
+    assert {f: new.frames[f].record.original.name for f in old_names} == old_names  # same ids, same photos
+    assert len(new.frames) == 13
+    assert len(new.cameras) >= 12
+    capsys.readouterr()
