@@ -3,10 +3,10 @@
 Object at the origin, inside the sphere of radius R (DESIGN.md §3), +Z up. From:
 - up: the cameras' average up vector (a photographer holds the camera roughly upright),
 - centre: where the optical axes converge (least squares), refined by the sparse points near it,
-- support plane: most objects stand on a table or floor, whose sparse points would otherwise
-  count as object (the radius would cover the floor and the masks would swallow it), so a
-  RANSAC plane roughly perpendicular to up is found and its points (and those below it) are set
-  aside as background,
+- support plane: most objects stand on a table or floor, or hang on a wall, whose sparse points
+  would otherwise count as object (the radius would cover the floor and the masks would swallow
+  it), so the dominant RANSAC plane that (nearly) every camera is in front of is found and its
+  points, and those behind it, are set aside as background,
 - radius: a high percentile of the remaining points' distances (the object), with a margin,
 - heading: turned about +Z so the first camera looks along +Y, i.e. sees the object's front as the
   renderer's orbit azimuth 0 does.
@@ -29,7 +29,7 @@ class NormalizeConfig:
     core_fraction: float = 0.6  # sparse points within this fraction of the median camera distance count as object
     radius_percentile: float = 95.0
     min_points: int = 20
-    plane_max_tilt_deg: float = 25.0  # the support plane's normal is within this of the cameras' up
+    plane_cameras_fraction: float = 0.9  # of the cameras that must be in front of a support plane
     plane_tolerance: float = 0.01  # inlier distance, as a fraction of the median camera distance
     plane_min_fraction: float = 0.2  # of the points near the object, for a plane to count
     plane_iterations: int = 300
@@ -131,7 +131,7 @@ def estimate_normalization(cameras: dict[str, Camera], points: np.ndarray | None
     if points is not None and len(points) >= config.min_points:
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         near = p[np.linalg.norm(p - center, axis=1) < config.core_fraction * camera_distance]
-        plane_source = find_support_plane(near, up, config.plane_tolerance * camera_distance, config)
+        plane_source = find_support_plane(near, centres, config.plane_tolerance * camera_distance, config)
         if plane_source is not None:
             normal, offset = plane_source
             # Off the plane by more than twice the tolerance, on the cameras' side.
@@ -183,14 +183,19 @@ def _object_on_plane(points: np.ndarray, plane: tuple[np.ndarray, float], config
     return center, radius
 
 
-def find_support_plane(points: np.ndarray, up: np.ndarray, tolerance: float, config: NormalizeConfig,
+def find_support_plane(points: np.ndarray, camera_centres: np.ndarray, tolerance: float, config: NormalizeConfig,
                        seed: int = 0) -> tuple[np.ndarray, float] | None:
-    """The largest plane roughly perpendicular to `up` among `points` (RANSAC, then a least-squares
-    refit), as (unit normal pointing along up, offset). None when no plane holds enough points."""
+    """The largest plane among `points` that (nearly) every camera looks at from the same side: a
+    table under the object or a wall behind it (RANSAC, then a least-squares refit). Returned as
+    (unit normal pointing toward the cameras, offset). None when no plane holds enough points."""
     if len(points) < max(config.min_points, 3):
         return None
     rng = np.random.default_rng(seed)
-    max_tilt = np.cos(np.deg2rad(config.plane_max_tilt_deg))
+
+    def cameras_in_front(n: np.ndarray, d: float) -> float:
+        side = camera_centres @ n - d
+        return max(float(np.mean(side > 0)), float(np.mean(side < 0)))
+
     best, best_count = None, 0
     for _ in range(config.plane_iterations):
         a, b, c = points[rng.choice(len(points), 3, replace=False)]
@@ -199,18 +204,16 @@ def find_support_plane(points: np.ndarray, up: np.ndarray, tolerance: float, con
         if length < 1e-12:
             continue
         n /= length
-        if abs(n @ up) < max_tilt:
-            continue
         inliers = np.abs((points - a) @ n) < tolerance
         count = int(inliers.sum())
-        if count > best_count:
+        if count > best_count and cameras_in_front(n, float(n @ a)) >= config.plane_cameras_fraction:
             best, best_count = inliers, count
     if best is None or best_count < config.plane_min_fraction * len(points):
         return None
     q = points[best]
     centroid = q.mean(axis=0)
     normal = np.linalg.svd(q - centroid)[2][-1]
-    if normal @ up < 0:
+    if np.mean(camera_centres @ normal - normal @ centroid > 0) < 0.5:
         normal = -normal
     return normal, float(normal @ centroid)
 
