@@ -60,6 +60,8 @@ def build_parser() -> argparse.ArgumentParser:
     cap.add_argument("capture", nargs="?", type=Path, help="with --add: the capture folder to extend")
     cap.add_argument("-o", "--out", type=Path, help="the capture folder to create")
     cap.add_argument("--add", action="store_true", help="add the photos in INPUTS to the existing capture CAPTURE")
+    cap.add_argument("--fix-mask", metavar="FRAME_ID", help="INPUTS is a corrected mask (PNG, 255 = object) for this frame of "
+                     "CAPTURE; the correction propagates to the other views")
     cap.add_argument("--poses", help="use known poses: a transforms.json (NeRF, instant-ngp, nerfstudio) or a COLMAP model folder")
     cap.add_argument("--masks", default="auto", help="auto (alpha if every photo has one, else automatic), alpha, automatic, or a folder of masks")
     cap.add_argument("--max-side", type=int, default=1280, help="long side of the working images (default 1280)")
@@ -179,6 +181,19 @@ def _run_capture(args: argparse.Namespace) -> int:
         bar.n = done
         bar.refresh()
 
+    if args.fix_mask:
+        import cv2
+
+        from .capture.pipeline import fix_mask
+
+        if args.capture is None:
+            raise LirmUserError("lirm capture --fix-mask FRAME_ID MASK.png CAPTURE: name the capture folder")
+        mask = cv2.imread(args.inputs, cv2.IMREAD_GRAYSCALE)
+        if mask is None:
+            raise LirmUserError(f"{args.inputs}: cannot read the corrected mask; save it as a PNG, 255 = object")
+        changed = fix_mask(args.capture, args.fix_mask, mask, config)
+        print(f"mask of {changed[0]} replaced; the correction changed {len(changed) - 1} other views: {', '.join(changed[1:]) or 'none'}")
+        return 0
     try:
         if args.add:
             if args.capture is None:

@@ -357,13 +357,15 @@ def _refine_trimap(
     return tri
 
 
-def _cut_below_plane(hull: VoxelHull, plane: tuple[np.ndarray, float]) -> None:
-    """Drop hull voxels under the support plane: no view sees under the table."""
+def _cut_below_plane(hull: VoxelHull, plane: tuple[np.ndarray, float], margin_voxels: float = 1.5) -> None:
+    """Drop hull voxels under the support plane (no view sees under the table) and the layer just
+    above it: voxels straddling the floor would keep a collar of floor around the object's base
+    in every mask (measured on a bottle: IoU 0.45); the sliver of the base they cost is small."""
     normal, offset = np.asarray(plane[0], dtype=np.float64), float(plane[1])
     idx = np.argwhere(hull.occupancy)
     if len(idx) == 0:
         return
-    below = idx[hull.centers_of(idx) @ normal - offset < 0.0]
+    below = idx[hull.centers_of(idx) @ normal - offset < margin_voxels * hull.voxel_size]
     hull.occupancy[below[:, 0], below[:, 1], below[:, 2]] = False
 
 

@@ -134,8 +134,9 @@ def estimate_normalization(cameras: dict[str, Camera], points: np.ndarray | None
         plane_source = find_support_plane(near, centres, config.plane_tolerance * camera_distance, config)
         if plane_source is not None:
             normal, offset = plane_source
-            # Off the plane by more than twice the tolerance, on the cameras' side.
-            near = near[near @ normal - offset > 2.0 * config.plane_tolerance * camera_distance]
+            # Off the plane by more than three times the tolerance, on the cameras' side.
+            near = near[near @ normal - offset > 3.0 * config.plane_tolerance * camera_distance]
+            near = _drop_stragglers(near, normal)
         if len(near) >= config.min_points:
             if plane_source is not None:
                 center, radius = _object_on_plane(near, plane_source, config)
@@ -166,6 +167,18 @@ def estimate_normalization(cameras: dict[str, Camera], points: np.ndarray | None
         point_on_plane = normal * offset
         plane = (rotation @ normal, float((rotation @ normal) @ (transform[:3, :3] @ point_on_plane + transform[:3, 3])))
     return Normalization(transform, np.asarray(center, dtype=np.float64), float(radius), up, used, plane)
+
+
+def _drop_stragglers(points: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """Keep the points whose distance from the group's middle, measured along the plane, is within
+    three times the median: a few floor points that noise lifted off the plane would otherwise set
+    the radius of a slim object (a bottle: 66 object points, the radius doubled)."""
+    if len(points) < 4:
+        return points
+    flat = points - np.outer(points @ normal, normal)
+    middle = np.median(flat, axis=0)
+    distance = np.linalg.norm(flat - middle, axis=1)
+    return points[distance <= 3.0 * max(float(np.median(distance)), 1e-12)]
 
 
 def _object_on_plane(points: np.ndarray, plane: tuple[np.ndarray, float], config: NormalizeConfig) -> tuple[np.ndarray, float]:

@@ -23,7 +23,7 @@ from .capture_folder import Capture, FrameState
 from .colmap_posing import ColmapConfig, extend_colmap_pose, pose_with_colmap
 from .crop import CropConfig, EmptyMaskError, prepare_view
 from .ingest import Cancelled, IngestConfig, ingest_photos
-from .masks import check_mask, load_user_masks, mask_from_alpha
+from .masks import check_mask, load_user_masks, mask_from_alpha, propagate_mask_fix
 from .normalize import NormalizeConfig, estimate_normalization
 from .pose_import import import_colmap_model, import_transforms_json
 from .records import FileReport, ImageRecord, PosingResult
@@ -91,6 +91,34 @@ def add_to_capture(root: str | Path, inputs: str | Path | int, config: CaptureCo
         return _summary(capture)
     capture.settings.pop("completed", None)
     return _finish(capture, config, progress, cancel, new_frames=new)
+
+
+def fix_mask(root: str | Path, frame_id: str, mask: np.ndarray, config: CaptureConfig = CaptureConfig()) -> list[str]:
+    """The user corrected one view's mask: keep it, carry the correction to the other views through
+    the visual hull (they only lose regions the corrected view rules out), and re-crop what changed.
+    Returns the frames whose masks changed, the corrected one first."""
+    capture = Capture.open(root)
+    if frame_id not in capture.cameras:
+        raise LirmUserError(f"frame {frame_id} is not posed in {root}; posed frames: {', '.join(sorted(capture.cameras))}")
+    camera = capture.cameras[frame_id]
+    mask = np.asarray(mask)
+    if mask.shape != (camera.height, camera.width):
+        raise LirmUserError(f"the corrected mask is {mask.shape[1]}x{mask.shape[0]} but frame {frame_id} is "
+                            f"{camera.width}x{camera.height}; draw it on the capture's working image")
+    mask = np.where(mask > 127, 255, 0).astype(np.uint8)
+    masks = {f: m for f in capture.cameras if (m := capture.read_mask(f)) is not None}
+    new_masks, changed = propagate_mask_fix(frame_id, mask, capture.cameras, masks, radius=config.normalize.target_radius)
+    capture.write_mask(frame_id, mask, source="fixed", status=check_mask(mask) or "ok")
+    for f in changed:
+        if f != frame_id:
+            capture.write_mask(f, new_masks[f], source="fixed", status=check_mask(new_masks[f]) or "ok")
+    touched = [frame_id] + [f for f in changed if f != frame_id]
+    for f in touched:
+        if capture.frames[f].mask_status == "ok":
+            capture.write_prepared(prepare_view(f, capture.read_image(f)[:, :, :3], capture.read_mask(f), capture.cameras[f], config.crop))
+    capture.log("fix mask", frame=frame_id, propagated_to=[f for f in touched if f != frame_id])
+    capture.save()
+    return touched
 
 
 # ---- stages ---------------------------------------------------------------------------------------

@@ -141,3 +141,69 @@ def test_adding_photos_keeps_old_frames(tmp_path, capsys, shared_data):
     assert len(new.frames) == 13
     assert len(new.cameras) >= 12
     capsys.readouterr()
+
+
+def test_a_mask_fix_propagates_to_the_other_views(tmp_path, shared_data, capsys):
+    """Lego with alpha masks, then every mask gets a false blob beside the object; the user fixes one
+    view and the blob disappears from the others too (they share the hull's verdict)."""
+    lego = shared_data / "synth_nerf_lego_train"
+    folder = tmp_path / "lego"
+    folder.mkdir()
+    for i in range(0, 40, 4):
+        shutil.copy(lego / "train" / f"r_{i}.png", folder / f"r_{i}.png")
+    config = CaptureConfig(masks="alpha", poses=str(lego / "transforms_train.json"))
+    capture = run_capture(folder, tmp_path / "capture", config).capture
+    from lirm.engine.capture.visual_hull import sphere_silhouette
+
+    clean = {f: capture.read_mask(f) for f in capture.cameras}
+    # A false blob: a small ball floating beside the object, added to every view's mask.
+    blob_center = np.array([0.0, 0.0, 0.95])
+    blobbed = {}
+    for f, cam in capture.cameras.items():
+        blob = sphere_silhouette(cam, 0.08, center=blob_center) > 0
+        blobbed[f] = np.where(blob | (clean[f] > 127), 255, 0).astype(np.uint8)
+        capture.write_mask(f, blobbed[f], "alpha", "ok")
+    capture.save()
+    fixed_frame = sorted(capture.cameras)[0]
+    fixed_path = tmp_path / "fixed.png"
+    cv2.imwrite(str(fixed_path), clean[fixed_frame])
+    assert main(["capture", "--fix-mask", fixed_frame, str(fixed_path), str(capture.root)]) == 0
+    assert "other views" in capsys.readouterr().out
+    after = Capture.open(capture.root)
+    improved = 0
+    for f in after.cameras:
+        if f == fixed_frame:
+            continue
+        before_extra = ((blobbed[f] > 127) & (clean[f] < 128)).sum()
+        after_extra = ((after.read_mask(f) > 127) & (clean[f] < 128)).sum()
+        assert after_extra <= before_extra
+        improved += after_extra < 0.5 * before_extra
+    assert improved >= 5
+    assert after.frames[fixed_frame].mask_source == "fixed"
+
+
+@pytest.mark.slow
+def test_pipeline_on_a_gltf_photographed_on_a_floor_under_an_hdri(tmp_path, shared_data, gl_context):
+    """The issue's rendered capture: a glTF model on a textured ground plane under a real HDRI, with
+    known cameras. Poses and automatic masks are checked against the truth."""
+    from lirm.engine.assets.environment_files import load_environment_file
+    from lirm.engine.demo import capture_accuracy
+    from lirm.engine.synth.capture_scene import SyntheticCaptureConfig, render_synthetic_capture
+    from lirm.renderer.pbr_renderer import PBRRenderer
+
+    renderer = PBRRenderer(gl_context)
+    try:
+        env = load_environment_file(shared_data / "envmaps" / "forest_slope_1k.hdr")
+        model = str(shared_data / "pbr_models" / "WaterBottle_tex256.glb")
+        shoot = render_synthetic_capture(renderer, env, SyntheticCaptureConfig(object_name=model))
+    finally:
+        renderer.release()
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for k, image in shoot.images.items():
+        cv2.imwrite(str(photos / f"shot_{k}.jpg"), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+    summary = run_capture(photos, tmp_path / "capture")
+    accuracy = capture_accuracy(summary.capture, shoot.cameras, {f"shot_{k}": m for k, m in shoot.masks.items()})
+    assert summary.registered == 16
+    assert accuracy["rotation_deg_max"] < 1.0 and accuracy["center_error_max"] < 0.01
+    assert accuracy["mask_iou_mean"] >= 0.9, accuracy
