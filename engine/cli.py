@@ -60,6 +60,9 @@ def build_parser() -> argparse.ArgumentParser:
     cap.add_argument("capture", nargs="?", type=Path, help="with --add: the capture folder to extend")
     cap.add_argument("-o", "--out", type=Path, help="the capture folder to create")
     cap.add_argument("--add", action="store_true", help="add the photos in INPUTS to the existing capture CAPTURE")
+    cap.add_argument("--resume", action="store_true", help="INPUTS is an interrupted capture folder: finish its remaining stages")
+    cap.add_argument("--reference-originals", action="store_true",
+                     help="refer to the original photos where they are instead of copying them into the capture")
     cap.add_argument("--fix-mask", metavar="FRAME_ID", help="INPUTS is a corrected mask (PNG, 255 = object) for this frame of "
                      "CAPTURE; the correction propagates to the other views")
     cap.add_argument("--poses", help="use known poses: a transforms.json (NeRF, instant-ngp, nerfstudio) or a COLMAP model folder")
@@ -160,7 +163,8 @@ def _run_capture(args: argparse.Namespace) -> int:
     from .capture.report import format_capture_report
 
     config = CaptureConfig(masks=args.masks, poses=args.poses)
-    config = replace(config, ingest=replace(config.ingest, max_side=args.max_side), crop=replace(config.crop, size=args.size))
+    config = replace(config, ingest=replace(config.ingest, max_side=args.max_side, copy_originals=not args.reference_originals),
+                     crop=replace(config.crop, size=args.size))
     source: str | int = args.inputs
     if args.inputs.startswith("camera:"):
         try:
@@ -195,7 +199,11 @@ def _run_capture(args: argparse.Namespace) -> int:
         print(f"mask of {changed[0]} replaced; the correction changed {len(changed) - 1} other views: {', '.join(changed[1:]) or 'none'}")
         return 0
     try:
-        if args.add:
+        if args.resume:
+            from .capture.pipeline import resume_capture
+
+            summary = resume_capture(Path(args.inputs), config, progress=progress)
+        elif args.add:
             if args.capture is None:
                 raise LirmUserError("lirm capture --add PHOTOS CAPTURE: name the capture folder to extend")
             summary = add_to_capture(args.capture, source, config, progress=progress)

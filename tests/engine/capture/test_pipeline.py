@@ -86,8 +86,13 @@ def test_imported_poses_and_alpha_masks(tmp_path, shared_data):
     folder.mkdir()
     for i in range(0, 24, 2):
         shutil.copy(lego / "train" / f"r_{i}.png", folder / f"r_{i}.png")
-    config = CaptureConfig(masks="alpha", poses=str(lego / "transforms_train.json"))
-    summary = run_capture(folder, tmp_path / "capture", config)
+    code = main(["capture", str(folder), "-o", str(tmp_path / "capture"), "--masks", "alpha",
+                 "--poses", str(lego / "transforms_train.json"), "--reference-originals"])
+    assert code == 0
+    summary_capture = Capture.open(tmp_path / "capture")
+    assert not (tmp_path / "capture" / "originals").exists()  # referenced, not copied
+    assert all(s.record.original.parent == folder for s in summary_capture.frames.values())
+    summary = resume_capture(tmp_path / "capture")  # nothing left to do: the same capture back
     assert summary.registered == 12 and summary.masked == 12 and summary.prepared == 12
     capture = summary.capture
     view = capture.read_prepared(sorted(capture.cameras)[0])
@@ -118,8 +123,10 @@ def test_an_interrupted_capture_resumes(tmp_path, shared_data):
         run_capture(folder, tmp_path / "capture", config, cancel=cancel_during_crops)
     reopened = Capture.open(tmp_path / "capture")
     assert "masks" in reopened.settings["completed"] and "crops" not in reopened.settings["completed"]
-    summary = resume_capture(tmp_path / "capture", config)
-    assert summary.prepared == 6
+    assert main(["capture", "--resume", str(tmp_path / "capture"), "--masks", "alpha",
+                 "--poses", str(lego / "transforms_train.json")]) == 0
+    assert len(list((tmp_path / "capture" / "prepared").glob("*.npz"))) == 6
+    assert Capture.open(tmp_path / "capture").settings["completed"][-1] == "crops"
 
 
 @pytest.mark.slow
