@@ -1,0 +1,102 @@
+"""The decoded field (paper eqs. 8-16): SDF with the s_bias prior, PBR materials, normals and colour.
+
+Separate small MLPs (2-3 hidden layers, 32 wide) read the concatenated plane features f. Colour is
+MLP_c(f, f_d) with f_d from the NDE panoramas at the reflection direction ("nde"), or MLP_c(f)
+("diff"). The density is VolSDF's Laplace CDF of -s with scale beta (eq. 9).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from .config import LIRMConfig
+from .hexaplane import query_planes
+from .nde import query_nde, reflect
+
+
+def mlp(inputs: int, outputs: int, hidden: int, layers: int) -> nn.Sequential:
+    mods: list[nn.Module] = []
+    width = inputs
+    for _ in range(layers):
+        mods += [nn.Linear(width, hidden), nn.SiLU()]
+        width = hidden
+    mods.append(nn.Linear(width, outputs))
+    return nn.Sequential(*mods)
+
+
+class FieldHeads(nn.Module):
+    def __init__(self, config: LIRMConfig):
+        super().__init__()
+        self.config = config
+        f = 3 * config.plane_channels
+        h, n = config.head_hidden, config.head_layers
+        self.sdf = mlp(f, 1, h, n)
+        self.albedo = mlp(f, 3, h, n)
+        self.roughness = mlp(f, 1, h, n)
+        self.metallic = mlp(f, 1, h, n)
+        self.normal = mlp(f, 3, h, n)
+        extra = config.nde_channels if config.colour == "nde" else 0
+        self.colour = mlp(f + extra, 3, h, n)
+        self.rho = mlp(f, 1, h, n) if config.colour == "nde" else None
+
+
+@dataclass
+class FieldSample:
+    sdf: torch.Tensor  # (B, N)
+    albedo: torch.Tensor  # (B, N, 3) linear, in (0, 1)
+    roughness: torch.Tensor  # (B, N)
+    metallic: torch.Tensor  # (B, N)
+    normal: torch.Tensor  # (B, N, 3) unit, predicted by MLP_n
+    colour: torch.Tensor | None  # (B, N, 3) view-dependent radiance (None when no view directions)
+
+
+class Field:
+    """A decoded reconstruction state: planes (and panoramas) plus the heads that read them."""
+
+    def __init__(self, config: LIRMConfig, heads: FieldHeads, planes: torch.Tensor, panoramas: torch.Tensor | None):
+        self.config = config
+        self.heads = heads
+        self.planes = planes
+        self.panoramas = panoramas
+
+    def features(self, points: torch.Tensor) -> torch.Tensor:
+        return query_planes(self.planes, points, self.config.radius)
+
+    def sdf(self, points: torch.Tensor) -> torch.Tensor:
+        """(B, N, 3) -> (B, N): MLP_s(f) + ||x|| - 0.1 R."""
+        return self.heads.sdf(self.features(points))[..., 0] + self._sdf_bias(points)
+
+    def _sdf_bias(self, points: torch.Tensor) -> torch.Tensor:
+        return points.norm(dim=-1) - self.config.sdf_bias_fraction * self.config.radius
+
+    def sample(self, points: torch.Tensor, view_dirs: torch.Tensor | None = None) -> FieldSample:
+        f = self.features(points)
+        h = self.heads
+        normal = F.normalize(h.normal(f), dim=-1)
+        colour = None
+        if view_dirs is not None:
+            if self.config.colour == "nde":
+                rho = torch.sigmoid(h.rho(f))[..., 0]
+                f_d = query_nde(self.panoramas, reflect(view_dirs, normal), rho)
+                colour = torch.sigmoid(h.colour(torch.cat([f, f_d], dim=-1)))
+            else:
+                colour = torch.sigmoid(h.colour(f))
+        return FieldSample(
+            sdf=h.sdf(f)[..., 0] + self._sdf_bias(points),
+            albedo=torch.sigmoid(h.albedo(f)),
+            roughness=torch.sigmoid(h.roughness(f))[..., 0],
+            metallic=torch.sigmoid(h.metallic(f))[..., 0],
+            normal=normal,
+            colour=colour,
+        )
+
+
+def volsdf_density(sdf: torch.Tensor, beta: float | torch.Tensor) -> torch.Tensor:
+    """sigma = 1/2 exp(-s/beta) for s >= 0, 1 - 1/2 exp(s/beta) for s < 0 (paper eq. 9, as written;
+    VolSDF scales it by 1/beta, which the renderer applies)."""
+    half = 0.5 * torch.exp(-sdf.abs() / beta)
+    return torch.where(sdf >= 0, half, 1.0 - half)
