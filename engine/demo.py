@@ -10,7 +10,7 @@ Later issues grow this into reconstruction and export.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 

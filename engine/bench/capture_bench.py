@@ -34,12 +34,13 @@ class CaptureBenchResult:
     rows: list[dict] = field(default_factory=list)
 
     def table(self) -> str:
-        stages = ("ingest", "pose", "normalize", "masks", "crops")
-        head = f"  {'photos':>6} {'posed':>6} " + " ".join(f"{s:>9}" for s in stages) + f" {'total s':>8} {'peak MB':>8}"
+        from lirm.engine.capture.pipeline import STAGES
+
+        head = f"  {'photos':>6} {'posed':>6} " + " ".join(f"{s:>9}" for s in STAGES) + f" {'total s':>8} {'peak MB':>8}"
         lines = [f"photos from: {self.photos}", "", "seconds per stage (wall clock, this machine)", head]
         for r in self.rows:
             t = r["timings"]
-            lines.append(f"  {r['photos']:>6} {r['registered']:>6} " + " ".join(f"{t.get(s, float('nan')):>9.1f}" for s in stages)
+            lines.append(f"  {r['photos']:>6} {r['registered']:>6} " + " ".join(f"{t.get(s, float('nan')):>9.1f}" for s in STAGES)
                          + f" {r['total_seconds']:>8.1f} {r['peak_rss_mb']:>8.0f}")
         return "\n".join(lines)
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 import statistics
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 from lirm.renderer.context import create_headless_context, describe
 from lirm.renderer.ibl import IBL_PRESETS, IBLBaker

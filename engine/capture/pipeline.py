@@ -26,7 +26,7 @@ from .ingest import Cancelled, IngestConfig, ingest_photos
 from .masks import check_mask, load_user_masks, mask_from_alpha, propagate_mask_fix
 from .normalize import NormalizeConfig, estimate_normalization
 from .pose_import import import_colmap_model, import_transforms_json
-from .records import FileReport, ImageRecord, PosingResult
+from .records import PosingResult
 from .undistort import undistort_image
 from .video_frames import VideoConfig, select_video_frames
 
@@ -200,7 +200,6 @@ def _apply_posing(capture: Capture, result: PosingResult) -> None:
     capture.settings["source_cameras"] = {k: v.to_dict() for k, v in raw.items()}
     capture.cameras = raw  # source frame until normalised
     capture.points = np.asarray(result.points, dtype=np.float64).reshape(-1, 3)
-    capture.settings["normalized"] = False
 
 
 def _normalize(capture: Capture, config: CaptureConfig) -> None:
@@ -211,7 +210,6 @@ def _normalize(capture: Capture, config: CaptureConfig) -> None:
     capture.normalization = norm
     capture.cameras = {k: norm.apply_to_camera(c) for k, c in source.items()}
     capture.points = norm.apply_to_points(capture.points) if len(capture.points) else capture.points
-    capture.settings["normalized"] = True
     # Pinhole working images for every later stage (see undistort.py).
     for frame_id, camera in list(capture.cameras.items()):
         capture.frames[frame_id].pinhole_image = None

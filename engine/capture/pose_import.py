@@ -59,7 +59,7 @@ class _Matcher:
 def _image_size(path: Path) -> tuple[int, int] | None:
     """(width, height) of an image file as displayed (EXIF orientation applied), or None."""
     try:
-        from PIL import Image, ImageOps
+        from PIL import Image
     except ImportError:  # pragma: no cover - Pillow is a dependency
         return None
     try:
