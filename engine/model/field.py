@@ -63,6 +63,15 @@ class Field:
         self.planes = planes
         self.panoramas = panoramas
 
+    @property
+    def radius(self) -> float:
+        return self.config.radius
+
+    @property
+    def normal_eps(self) -> float:
+        """Central-difference step for numerical normals: 2 voxels of the hexa-plane (paper §3.4)."""
+        return 2.0 * (2.0 * self.config.radius / self.config.plane_resolution)
+
     def features(self, points: torch.Tensor) -> torch.Tensor:
         return query_planes(self.planes, points, self.config.radius)
 
