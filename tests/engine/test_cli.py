@@ -156,8 +156,7 @@ def test_demo_photographs_and_captures_a_builtin_object(tmp_path):
     centre_max = float(re.search(r"camera-centre error median [\d.]+%, max ([\d.]+)%", out).group(1))
     iou_mean = float(re.search(r"IoU mean ([\d.]+)", out).group(1))
     assert rotation_max < 1.0 and centre_max < 1.0
-    # Mask accuracy varies with COLMAP's run (its mapping is multi-threaded and not repeatable):
-    # 0.944 and 0.964 in two runs, 0.565 in a third, so the demo asserts a sanity bound here and the
-    # acceptance figure (>= 0.9) is open work in issue 3; test_pipeline's glTF capture asserts it.
-    assert iou_mean >= 0.5
+    # COLMAP's mapping is multi-threaded and not repeatable; before the object's centre followed the
+    # cameras' aim, one run in two put it half an object off (IoU 0.57). Now 0.956-0.971 in 5 runs.
+    assert iou_mean >= 0.9
     assert len(list((tmp_path / "demo" / "capture" / "prepared").glob("*.npz"))) >= 12
