@@ -71,6 +71,17 @@ def build_parser() -> argparse.ArgumentParser:
     cap.add_argument("--reference", type=Path, help="report pose errors against this transforms.json (for known test scenes)")
     cap.set_defaults(run=_run_capture)
 
+    rec = sub.add_parser("reconstruct", help="run progressive LIRM updates on a prepared capture; pictures after each update")
+    rec.add_argument("capture", type=Path, help="a capture folder made by `lirm capture`")
+    rec.add_argument("--checkpoint", type=Path, help="model weights (.safetensors); default: the shipped checkpoint, else UNTRAINED weights")
+    rec.add_argument("--preset", default="small", choices=["tiny", "small", "paper"], help="model size when no checkpoint is given (default small)")
+    rec.add_argument("--views-per-update", type=int, default=4, help="views fed to each update (default 4)")
+    rec.add_argument("--updates", type=int, help="stop after this many updates (default: until the views run out)")
+    rec.add_argument("--novel-views", type=int, default=4, help="orbit views rendered after each update (default 4)")
+    rec.add_argument("--render-size", type=int, default=128, help="side of those renders in pixels (default 128)")
+    rec.add_argument("--grid-resolution", type=int, default=128, help="occupancy grid voxels per side for those renders (default 128; the paper uses 250)")
+    rec.set_defaults(run=_run_reconstruct)
+
     bench = sub.add_parser("bench", help="benchmarks")
     bench_sub = bench.add_subparsers(title="benchmarks", metavar="BENCH", required=True)
     br = bench_sub.add_parser("render", help="renderer speed: environment preprocessing and G-buffer frames per second")
@@ -215,6 +226,48 @@ def _run_capture(args: argparse.Namespace) -> int:
             bar.close()
     print(format_capture_report(summary, reference=args.reference))
     return 0 if summary.usable else 1
+
+
+def _run_reconstruct(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from tqdm import tqdm
+
+    from .model.pretrained import load_model
+    from .reconstruction.session import ReconstructConfig, run_reconstruction
+
+    if not (args.capture / "capture.json").exists():
+        raise LirmUserError(f"{args.capture} is not a capture folder (no capture.json); make one with `lirm capture PHOTOS -o {args.capture}`")
+    for name in ("views_per_update", "novel_views", "render_size", "grid_resolution"):
+        if getattr(args, name) < 1:
+            raise LirmUserError(f"--{name.replace('_', '-')} must be at least 1")
+    if args.updates is not None and args.updates < 1:
+        raise LirmUserError("--updates must be at least 1")
+    source = load_model(args.checkpoint, args.preset)
+    if source.warning:
+        print("\n" + "!" * 100 + f"\n{source.warning}\n" + "!" * 100 + "\n", file=sys.stderr)
+    config = replace(ReconstructConfig(), views_per_update=args.views_per_update, updates=args.updates,
+                     novel_views=args.novel_views, render_size=args.render_size,
+                     occupancy=replace(ReconstructConfig().occupancy, resolution=args.grid_resolution))
+    bar = tqdm(desc="LIRM updates", unit="update", file=sys.stderr, disable=None)
+
+    def progress(stage: str, done: int, total: int) -> None:
+        bar.total = total
+        bar.n = done
+        bar.refresh()
+
+    try:
+        result = run_reconstruction(args.capture, source, config, progress=progress)
+    finally:
+        bar.close()
+    print(f"weights: {source.description}" + ("" if source.trained else "  (UNTRAINED)"))
+    for r in result.updates:
+        print(f"update {r.update}: {len(r.frames)} views ({', '.join(r.frames)}) in {r.seconds:.2f} s; "
+              f"renders in {r.render_seconds:.1f} s ({100 * r.skipped_samples:.0f}% of samples skipped) -> {args.capture / r.out_dir}/")
+    print(f"summary: {result.out_dir / 'summary.json'}")
+    if source.warning:
+        print(source.warning, file=sys.stderr)
+    return 0
 
 
 def _run_demo(args: argparse.Namespace) -> int:

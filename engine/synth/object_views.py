@@ -1,0 +1,87 @@
+"""Ground-truth views of one object for the network: what the capture pipeline would hand it (masked
+image on white, the unmasked image with the environment behind, Plücker rays) plus the true mask,
+albedo, roughness, metallic and normal maps to supervise it.
+
+The object is scaled into a sphere of `object_radius` inside the field's R = 1 (the paper's objects
+sit inside the bounding sphere with some room). Cameras follow the supplementary's test protocol:
+FoV 50 degrees, at the distance where the bounding sphere just fits.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from lirm.engine.assets.asset_source import resolve_asset
+from lirm.engine.cameras import Camera, distance_to_cover_sphere, orbit_camera
+from lirm.engine.model.lirm import ViewBatch
+from lirm.engine.orbit_render import normalizing_transform
+from lirm.renderer.environment import Environment
+from lirm.renderer.pbr_renderer import PBRRenderer, RenderSettings
+
+
+@dataclass(frozen=True)
+class ObjectViewsConfig:
+    object_name: str = "vase"
+    seed: int = 0
+    size: int = 64
+    supersample: int = 2
+    fov_deg: float = 50.0
+    object_radius: float = 0.8
+
+
+@dataclass
+class ObjectViews:
+    cameras: list[Camera]
+    image: np.ndarray  # (V, S, S, 3) display sRGB object on white
+    image_bg: np.ndarray  # (V, S, S, 3) display sRGB with the environment behind
+    mask: np.ndarray  # (V, S, S) coverage in [0, 1]
+    albedo: np.ndarray  # (V, S, S, 3) linear base colour, 0 off the object
+    roughness: np.ndarray  # (V, S, S)
+    metallic: np.ndarray  # (V, S, S)
+    normal: np.ndarray  # (V, S, S, 3) world normals, 0 off the object
+
+    def view_batch(self, indices: list[int] | None = None, device: str | torch.device = "cpu") -> ViewBatch:
+        idx = list(range(len(self.cameras))) if indices is None else list(indices)
+
+        def t(a: np.ndarray) -> torch.Tensor:
+            return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32)).permute(0, 3, 1, 2).unsqueeze(0).to(device)
+
+        plucker = np.stack([self.cameras[i].plucker() for i in idx])
+        return ViewBatch(t(self.image[idx]), t(self.image_bg[idx]), t(plucker))
+
+
+def protocol_cameras(azimuths_deg: list[float], elevations_deg: list[float], size: int, fov_deg: float = 50.0) -> list[Camera]:
+    distance = distance_to_cover_sphere(1.0, fov_deg)
+    return [orbit_camera(a, e, distance, size, size, fov_deg, axis="min") for a, e in zip(azimuths_deg, elevations_deg)]
+
+
+def render_object_views(renderer: PBRRenderer, environment: Environment, cameras: list[Camera],
+                        config: ObjectViewsConfig = ObjectViewsConfig()) -> ObjectViews:
+    model = resolve_asset(config.object_name, seed=config.seed)
+    transform = normalizing_transform(model.bounds)
+    transform[:3] *= config.object_radius
+    scene = renderer.upload(model.meshes, transform)
+    lighting = renderer.prepare_lighting(environment)
+    settings = RenderSettings(supersample=config.supersample)
+    # On black, the supersampled beauty is the object premultiplied by its coverage.
+    on_black = RenderSettings(supersample=config.supersample, show_environment=False, clear_color=(0.0, 0.0, 0.0))
+    outs, premultiplied = [], []
+    try:
+        for camera in cameras:
+            if (camera.width, camera.height) != (config.size, config.size):
+                raise ValueError(f"cameras must be {config.size}x{config.size}, got {camera.width}x{camera.height}")
+            outs.append(renderer.render_view(scene, camera, lighting, settings))
+            premultiplied.append(renderer.render_view(scene, camera, lighting, on_black).beauty)
+    finally:
+        scene.release()
+        lighting.maps.release()
+    mask = np.stack([o.mask for o in outs]).astype(np.float32)
+    image_bg = np.stack([o.beauty for o in outs]).astype(np.float32)
+    # With the environment on it is the photo; over white is what the capture's crop gives.
+    image = np.stack(premultiplied) + (1.0 - mask[..., None])
+    return ObjectViews(cameras, np.clip(image, 0, 1).astype(np.float32), np.clip(image_bg, 0, 1), mask,
+                       np.stack([o.albedo for o in outs]).astype(np.float32), np.stack([o.roughness for o in outs]).astype(np.float32),
+                       np.stack([o.metallic for o in outs]).astype(np.float32), np.stack([o.normal for o in outs]).astype(np.float32))

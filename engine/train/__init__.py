@@ -1,0 +1,1 @@
+"""Training LIRM: losses over rendered ray batches and the training loops."""

@@ -1,0 +1,92 @@
+"""`lirm reconstruct` on a prepared capture (lego renders with known poses and alpha masks: no
+COLMAP needed): updates in sets, pictures and states after each, the history in capture.json,
+the loud untrained warning, and clear errors for bad checkpoints and folders."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from lirm.engine.capture.capture_folder import Capture
+from lirm.engine.cli import main
+from lirm.engine.model.checkpoint import save_checkpoint
+from lirm.engine.model.config import preset
+from lirm.engine.model.lirm import LIRM
+from lirm.engine.model.state_file import load_state, save_state
+from lirm.engine.reconstruction.session import update_sets
+
+FAST = ["--preset", "tiny", "--novel-views", "1", "--render-size", "24", "--grid-resolution", "48"]
+
+
+@pytest.fixture(scope="module")
+def lego_capture(tmp_path_factory, shared_data) -> Path:
+    lego = shared_data / "synth_nerf_lego_train"
+    root = tmp_path_factory.mktemp("rec")
+    folder = root / "photos"
+    folder.mkdir()
+    for i in range(0, 40, 5):
+        shutil.copy(lego / "train" / f"r_{i}.png", folder / f"r_{i}.png")
+    assert main(["capture", str(folder), "-o", str(root / "capture"), "--masks", "alpha", "--size", "64",
+                 "--poses", str(lego / "transforms_train.json"), "--reference-originals"]) == 0
+    return root / "capture"
+
+
+def test_update_sets_split_in_frame_order():
+    assert update_sets(list("abcdefghij"), 4, None) == [list("abcd"), list("efgh"), list("ij")]
+    assert update_sets(list("abcdefghij"), 4, 2) == [list("abcd"), list("efgh")]
+
+
+def test_reconstruct_writes_each_update_and_warns_when_untrained(lego_capture, tmp_path, capsys):
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    assert main(["reconstruct", str(capture), "--updates", "2"] + FAST) == 0
+    out, err = capsys.readouterr()
+    assert "UNTRAINED" in err and "UNTRAINED" in out
+    for k in (1, 2):
+        folder = capture / "reconstruction" / f"update_{k:02d}"
+        for channel in ("colour", "albedo", "roughness", "metallic", "normal", "opacity"):
+            assert (folder / f"view_00_{channel}.png").exists()
+        state = load_state(folder / "state.safetensors")
+        assert state.updates == k and state.plane_tokens.shape[1] == preset("tiny").num_plane_tokens
+    summary = json.loads((capture / "reconstruction" / "summary.json").read_text())
+    assert summary["trained"] is False and len(summary["updates"]) == 2
+    updates = Capture.open(capture).updates
+    assert [u["update"] for u in updates] == [1, 2]
+    assert [len(u["frames"]) for u in updates] == [4, 4] and not set(updates[0]["frames"]) & set(updates[1]["frames"])
+
+
+def test_reconstruct_with_a_checkpoint_and_bad_ones(lego_capture, tmp_path, capsys):
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    torch.manual_seed(1)
+    ckpt = save_checkpoint(LIRM(preset("tiny")), tmp_path / "tiny.safetensors", metadata={"trained": True})
+    assert main(["reconstruct", str(capture), "--updates", "1", "--checkpoint", str(ckpt)] + FAST) == 0
+    out, err = capsys.readouterr()
+    assert "UNTRAINED" not in err and "tiny.safetensors" in out
+    broken = tmp_path / "broken.safetensors"
+    broken.write_bytes(ckpt.read_bytes()[:1000])
+    assert main(["reconstruct", str(capture), "--checkpoint", str(broken)] + FAST) == 2
+    assert "broken.safetensors" in capsys.readouterr().err
+    assert main(["reconstruct", str(tmp_path), "--preset", "tiny"]) == 2
+    assert "not a capture folder" in capsys.readouterr().err
+
+
+def test_state_files_round_trip_and_refuse_garbage(tmp_path):
+    torch.manual_seed(0)
+    model = LIRM(preset("tiny")).eval()
+    state = model.initial_state(1)
+    state.plane_tokens.normal_()
+    path = save_state(state, tmp_path / "state.safetensors")
+    back = load_state(path)
+    assert torch.equal(back.plane_tokens, state.plane_tokens) and back.signature == state.signature
+    (tmp_path / "junk.safetensors").write_bytes(b"not a state")
+    from lirm.engine.errors import LirmUserError
+
+    with pytest.raises(LirmUserError, match="junk.safetensors"):
+        load_state(tmp_path / "junk.safetensors")
+    assert np.isfinite(back.plane_tokens.numpy()).all()
