@@ -84,6 +84,21 @@ def build_parser() -> argparse.ArgumentParser:
 
     bench = sub.add_parser("bench", help="benchmarks")
     bench_sub = bench.add_subparsers(title="benchmarks", metavar="BENCH", required=True)
+    bm = bench_sub.add_parser("model", help="LIRM update loop: seconds, peak memory, tokens and FLOPs per update, and the all-views-at-once baseline")
+    bm.add_argument("--preset", default="small", choices=["tiny", "small", "paper"], help="model preset (default small)")
+    bm.add_argument("--updates", type=int, default=8, help="timed progressive updates (default 8)")
+    bm.add_argument("--views-per-update", type=int, default=4, help="views per update (default 4)")
+    bm.add_argument("--device", default="cpu", choices=["cpu", "cuda", "auto"], help="where to run (default cpu)")
+    bm.add_argument("--no-baseline", action="store_true", help="skip the all-views-at-once baseline")
+    bm.add_argument("--baseline-max-views", type=int, help="skip baseline sizes above this many views")
+    bm.add_argument("--json", type=Path, help="also write the figures to this JSON file")
+    bm.set_defaults(run=_run_bench_model)
+    bk = bench_sub.add_parser("capacity", help="overfit the model on one rendered object (the paper's capacity test): input-view PSNR and albedo PSNR")
+    bk.add_argument("--preset", default="tiny", choices=["tiny", "small", "paper"], help="model preset (default tiny)")
+    bk.add_argument("--object", default="vase", help="built-in object (vase, mug, toy_block, bottle) or a .glb/.gltf")
+    bk.add_argument("--steps", type=int, default=1500, help="training steps (default 1500)")
+    bk.add_argument("--json", type=Path, help="also write the figures and the loss history to this JSON file")
+    bk.set_defaults(run=_run_bench_capacity)
     br = bench_sub.add_parser("render", help="renderer speed: environment preprocessing and G-buffer frames per second")
     br.add_argument("--model", default="vase", help="model file or built-in object (the issue's figures use DamagedHelmet)")
     br.add_argument("--env", default="studio", help="built-in environment or .hdr/.exr (the issue's figures use a 1k HDR)")
@@ -287,6 +302,47 @@ def _run_demo(args: argparse.Namespace) -> int:
     print()
     if "mask_iou_mean" in a:
         print(f"  automatic masks against the truth: IoU mean {a['mask_iou_mean']:.3f}, worst {a['mask_iou_min']:.3f}")
+    return 0
+
+
+def _run_bench_model(args: argparse.Namespace) -> int:
+    from .bench.model_bench import ModelBenchConfig, run_model_bench
+
+    if args.updates < 1 or args.views_per_update < 1:
+        raise LirmUserError("--updates and --views-per-update must be at least 1")
+    config = ModelBenchConfig(preset=args.preset, updates=args.updates, views_per_update=args.views_per_update, device=args.device,
+                              baseline=not args.no_baseline, baseline_max_views=args.baseline_max_views, json_path=args.json)
+    result = run_model_bench(config, progress=lambda message: print(message, file=sys.stderr))
+    print(result.table())
+    if args.json:
+        print(f"figures written to {args.json}")
+    return 0
+
+
+def _run_bench_capacity(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from .io.atomic_files import atomic_write_json
+    from .synth.object_views import ObjectViewsConfig
+    from .train.overfit import OverfitConfig, run_overfit
+
+    if args.steps < 1:
+        raise LirmUserError("--steps must be at least 1")
+    config = replace(OverfitConfig(), preset=args.preset, steps=args.steps, views=ObjectViewsConfig(object_name=args.object),
+                     eval_every=max(args.steps // 6, 1))
+
+    def progress(record: dict) -> None:
+        if "psnr" in record:
+            print(f"step {record['step']}: loss {record['loss']:.5f}, input-view PSNR {record['psnr']:.2f} dB, "
+                  f"albedo PSNR {record['albedo_psnr']:.2f} dB", file=sys.stderr)
+
+    result = run_overfit(config, progress=progress)
+    print(f"capacity ({config.preset} preset, '{args.object}', {len(config.azimuths_deg)} views of {config.views.size}px, {len(result.history)} steps): "
+          f"input-view PSNR {result.psnr:.2f} dB (per view {', '.join(f'{p:.2f}' for p in result.psnr_per_view)}), "
+          f"albedo PSNR {result.albedo_psnr:.2f} dB; {result.seconds:.0f} s of training, {result.seconds_per_step:.2f} s per step")
+    if args.json:
+        atomic_write_json(args.json, result.to_dict())
+        print(f"figures written to {args.json}")
     return 0
 
 

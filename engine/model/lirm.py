@@ -78,7 +78,9 @@ class LIRM(nn.Module):
         out = self.transformer(torch.cat(parts + [images], dim=1))
         n_p, n_e = c.num_plane_tokens, c.num_nde_tokens
         # Only the 3D tokens survive the update; the image tokens (and their activations) are dropped.
-        return ReconState(out[:, :n_p], out[:, n_p:n_p + n_e] if n_e else None, state.updates + 1, state.signature)
+        # clone(): a slice would keep the whole output, image tokens included, alive in the state.
+        nde = out[:, n_p:n_p + n_e].clone() if n_e else None
+        return ReconState(out[:, :n_p].clone(), nde, state.updates + 1, state.signature)
 
     def decode(self, state: ReconState) -> Field:
         self._check_state(state)
