@@ -131,3 +131,13 @@ def test_bad_requests_are_user_errors():
     if not torch.cuda.is_available():
         with pytest.raises(LirmUserError, match="cuda"):
             run_model_bench(ModelBenchConfig(preset="tiny", device="cuda"))
+
+
+def test_memory_does_not_grow_over_eight_updates():
+    """The issue's check: peak memory after 8 updates within 5% of after 1, and the state holds
+    exactly its tokens (no slice keeping the transformer's whole output alive)."""
+    result = run_model_bench(ModelBenchConfig(preset="tiny", updates=8, baseline=False))
+    peaks = [u["peak_memory_bytes"] for u in result.updates]
+    assert len(peaks) == 8 and abs(peaks[-1] / peaks[0] - 1.0) < 0.05, peaks
+    assert all(u["state_storage_bytes"] == u["state_bytes"] for u in result.updates)
+    assert len({u["state_bytes"] for u in result.updates}) == 1
