@@ -39,8 +39,11 @@ def query_nde(panoramas: torch.Tensor, directions: torch.Tensor, rho: torch.Tens
     [0, 1] (0 = first panorama, 1 = last); returns (B, M, C).
 
     phi = atan2(l0, l1) and theta = arccos(l2) as the paper writes them (eq. 14)."""
-    phi = torch.atan2(directions[..., 0], directions[..., 1])
-    theta = torch.acos(directions[..., 2].clamp(-1.0, 1.0))
+    # Kept off the poles: acos has an infinite derivative at +-1 and atan2 an undefined one at (0, 0),
+    # either of which turns a training step's gradients into NaN.
+    eps = 1e-6
+    phi = torch.atan2(directions[..., 0], directions[..., 1] + eps * (directions[..., 1] == 0))
+    theta = torch.acos(directions[..., 2].clamp(-1.0 + eps, 1.0 - eps))
     grid = torch.stack([phi / math.pi, theta / math.pi * 2.0 - 1.0, rho * 2.0 - 1.0], dim=-1)  # x=W, y=H, z=N
     out = F.grid_sample(panoramas, grid[:, :, None, None, :], mode="bilinear", padding_mode="border", align_corners=True)
     return out[:, :, :, 0, 0].transpose(1, 2)

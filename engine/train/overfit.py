@@ -46,6 +46,7 @@ class OverfitConfig:
     albedo_weight: float = 1.0
     eval_every: int = 250
     eval_samples_per_ray: int = 128
+    max_skipped_steps: int = 20  # non-finite steps tolerated (skipped) before giving up
     seed: int = 0
 
 
@@ -110,6 +111,7 @@ def run_overfit(config: OverfitConfig = OverfitConfig(), views: ObjectViews | No
     n_object = int(config.rays_per_step * config.object_ray_fraction) if len(object_rays) else 0
     history: list[dict] = []
     train_seconds = 0.0
+    skipped = 0
     for step in range(config.steps):
         if cancel is not None and cancel():
             break
@@ -129,7 +131,14 @@ def run_overfit(config: OverfitConfig = OverfitConfig(), views: ObjectViews | No
         loss = colour_loss + config.albedo_weight * albedo_loss
         optimiser.zero_grad(set_to_none=True)
         loss.backward()
-        torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+        grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+        # A non-finite loss or gradient would poison the weights for good: skip that step instead,
+        # and stop with a clear message if it keeps happening.
+        if not (torch.isfinite(loss) and torch.isfinite(grad_norm)):
+            skipped += 1
+            if skipped > config.max_skipped_steps:
+                raise FloatingPointError(f"training diverged: {skipped} steps with non-finite loss or gradients (last at step {step + 1})")
+            continue
         optimiser.step()
         train_seconds += time.perf_counter() - step_start
         record = {"step": step + 1, "loss": loss.item(), "colour_loss": colour_loss.item(), "albedo_loss": albedo_loss.item()}
