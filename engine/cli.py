@@ -336,13 +336,18 @@ def _run_bench_capacity(args: argparse.Namespace) -> int:
             print(f"step {record['step']}: loss {record['loss']:.5f}, input-view PSNR {record['psnr']:.2f} dB, "
                   f"albedo PSNR {record['albedo_psnr']:.2f} dB", file=sys.stderr)
 
-    result = run_overfit(config, progress=progress)
+    from .io.images import to_uint8, write_png
+    from .train.overfit import comparison_sheet, render_training_views
+
+    views = render_training_views(config)
+    result = run_overfit(config, views, progress=progress)
     print(f"capacity ({config.preset} preset, '{args.object}', {len(config.azimuths_deg)} views of {config.views.size}px, {len(result.history)} steps): "
           f"input-view PSNR {result.psnr:.2f} dB (per view {', '.join(f'{p:.2f}' for p in result.psnr_per_view)}), "
           f"albedo PSNR {result.albedo_psnr:.2f} dB; {result.seconds:.0f} s of training, {result.seconds_per_step:.2f} s per step")
     if args.json:
         atomic_write_json(args.json, result.to_dict())
-        print(f"figures written to {args.json}")
+        sheet = write_png(args.json.with_suffix(".png"), to_uint8(comparison_sheet(views, result)))
+        print(f"figures written to {args.json}; renders against the truth (rows: image, render, albedo, rendered albedo) in {sheet}")
     return 0
 
 

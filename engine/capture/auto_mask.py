@@ -192,7 +192,7 @@ class _Seeds:
 
 
 def _project_seeds(level: _Level, points: np.ndarray, radius: float, cfg: AutoMaskConfig,
-                   is_object: np.ndarray | None = None) -> _Seeds:
+                   is_object: np.ndarray | None = None, seen: np.ndarray | None = None) -> _Seeds:
     cam = level.camera
     empty = np.zeros((0, 2))
     if len(points) == 0:
@@ -209,6 +209,9 @@ def _project_seeds(level: _Level, points: np.ndarray, radius: float, cfg: AutoMa
         # Points inside the ball that are not the object (the table it stands on) are background
         # where they lie nearer than the object's centre; farther ones may be hidden behind it.
         background |= on_img & inner & ~is_object & (z < np.linalg.norm(cam.center))
+        if seen is not None:
+            # Observed by this photo, so not hidden in it: background wherever it lies.
+            background |= on_img & ~is_object & seen
         inner = inner & is_object
     fg = xy[on_img & inner]
     if len(fg) < cfg.min_fg_points:
@@ -422,6 +425,7 @@ def automatic_masks(
     progress: Callable[[int, int], None] | None = None,
     point_is_object: np.ndarray | None = None,
     support_plane: tuple[np.ndarray, float] | None = None,
+    observations: Mapping[str, np.ndarray] | None = None,
 ) -> dict[str, np.ndarray]:
     """Object masks (uint8, 255 = object, full image size) for every frame in both dicts.
 
@@ -431,7 +435,9 @@ def automatic_masks(
     inside the ball counts as object. support_plane: optional (unit normal, offset) of the surface
     the object stands on (n . x = offset, normal toward the cameras); the hull is cut there instead
     of at the points' convex hull, which would also cut object parts that carry few points (a
-    smooth handle). radius: the object lies inside
+    smooth handle). observations: optional frame id -> indices of the points that photo observed
+    (SfM tracks); an observed point that is not the object is visible background in that photo,
+    wherever it lies (a wall behind a wall-mounted object). radius: the object lies inside
     this ball around the origin. progress(done, total) is called after each step of each view;
     raise from it to cancel. See the module docstring for the method and AutoMaskConfig for knobs.
     """
@@ -453,6 +459,13 @@ def automatic_masks(
         if progress is not None:
             progress(done, total)
 
+    seen_by: dict[str, np.ndarray] = {}
+    if observations is not None and labels is not None:
+        for f in frames:
+            if f in observations:
+                seen = np.zeros(len(finite), bool)
+                seen[np.asarray(observations[f], dtype=np.int64)] = True
+                seen_by[f] = seen[finite]
     views: dict[str, _View] = {}
     masks: dict[str, np.ndarray] = {}  # at the seed size until the first refinement, then work size
     models: dict[str, tuple[np.ndarray, np.ndarray]] = {}
@@ -462,7 +475,7 @@ def automatic_masks(
             raise ValueError(f"frame {f!r}: expected an RGB uint8 image, got {img.dtype} {img.shape}")
         view = _prepare_view(f, np.ascontiguousarray(img[:, :, :3]), cameras[f], radius, cfg)
         views[f] = view
-        seeds = _project_seeds(view.seed, pts, radius, cfg, labels)
+        seeds = _project_seeds(view.seed, pts, radius, cfg, labels, seen_by.get(f))
         res = _grabcut(view.seed.image, _seed_trimap(view, seeds, radius, cfg), cfg.seed_iterations, cfg)
         if res is None:
             masks[f] = np.zeros(view.seed.image.shape[:2], bool)
@@ -499,7 +512,7 @@ def automatic_masks(
                 m = cv2.resize(m.astype(np.uint8), (work.camera.width, work.camera.height),
                                interpolation=cv2.INTER_LINEAR) > 0
             hull_mask = None if hull is None else project_hull(hull, work.camera)
-            tri = _refine_trimap(work, m, hull_mask, _project_seeds(work, pts, radius, cfg, labels), cfg)
+            tri = _refine_trimap(work, m, hull_mask, _project_seeds(work, pts, radius, cfg, labels, seen_by.get(f)), cfg)
             res = _grabcut(work.image, tri, cfg.refine_iterations, cfg, models.get(f))
             if res is not None:
                 m = clean_mask(res[0], cfg.min_component_fraction, cfg.max_hole_fraction)

@@ -9,6 +9,9 @@
     masks/<id>.png    object masks (255 = object)
     prepared/<id>.npz the cropped network inputs (a cache: delete it and it is rebuilt)
     colmap/           the structure-from-motion workspace
+    points.npy        sparse points in the normalised world
+    observations.npz  per frame, the indices of the points that photo observed
+    reconstruction/   LIRM updates: states and renders per update (lirm reconstruct)
 
 Every write is atomic, and capture.json is rewritten after each stage, so a capture interrupted at
 any point reopens at its last completed stage.
@@ -54,6 +57,9 @@ class Capture:
     cameras: dict[str, Camera] = field(default_factory=dict)  # normalised world, registered frames
     normalization: Normalization | None = None
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # sparse points, normalised world
+    # Which sparse points each frame observed (indices into `points`; from COLMAP's tracks): a point
+    # a photo observed is visible in it, which the automatic masks use.
+    observations: dict[str, np.ndarray] = field(default_factory=dict)
     settings: dict = field(default_factory=dict)
     reports: list[FileReport] = field(default_factory=list)
     updates: list[dict] = field(default_factory=list)
@@ -128,6 +134,7 @@ class Capture:
     def save(self) -> None:
         self.root.mkdir(parents=True, exist_ok=True)
         atomic_write(self.root / "points.npy", self._write_points)
+        atomic_write(self.root / "observations.npz", self._write_observations)
         atomic_write_json(self.root / CAPTURE_FILE, {
             "format": "lirm-capture",
             "version": FORMAT_VERSION,
@@ -145,6 +152,10 @@ class Capture:
             "history": self.history,
         })
         self._write_transforms()
+
+    def _write_observations(self, tmp: Path) -> None:
+        with open(tmp, "wb") as f:
+            np.savez_compressed(f, **{k: np.asarray(v, dtype=np.int64) for k, v in self.observations.items()})
 
     def _write_points(self, tmp: Path) -> None:
         with open(tmp, "wb") as f:
@@ -208,6 +219,10 @@ class Capture:
         points = root / "points.npy"
         if points.exists():
             capture.points = np.load(points)
+        observations = root / "observations.npz"
+        if observations.exists():
+            with np.load(observations) as data:
+                capture.observations = {k: data[k] for k in data.files}
         return capture
 
 

@@ -200,6 +200,7 @@ def _apply_posing(capture: Capture, result: PosingResult) -> None:
     capture.settings["source_cameras"] = {k: v.to_dict() for k, v in raw.items()}
     capture.cameras = raw  # source frame until normalised
     capture.points = np.asarray(result.points, dtype=np.float64).reshape(-1, 3)
+    capture.observations = {f: np.asarray(v, dtype=np.int64) for f, v in result.observations.items() if f in capture.frames}
 
 
 def _normalize(capture: Capture, config: CaptureConfig) -> None:
@@ -248,7 +249,8 @@ def _masks(capture: Capture, config: CaptureConfig, progress, cancel) -> None:
                 mask_config = replace(mask_config, ball_probable_fraction=config.normalize.fill)
         masks = automatic_masks(rgb, {f: capture.cameras[f] for f in posed}, capture.points, radius=radius,
                                 config=mask_config, progress=_stage(progress, "masks"), point_is_object=is_object,
-                                support_plane=None if capture.normalization is None else capture.normalization.plane)
+                                support_plane=None if capture.normalization is None else capture.normalization.plane,
+                                observations=capture.observations or None)
         source = "auto"
     else:
         folder = Path(mode)

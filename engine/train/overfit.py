@@ -58,6 +58,7 @@ class OverfitResult:
     albedo_psnr_per_view: list[float]
     seconds: float  # training, evaluations excluded
     seconds_per_step: float
+    renders: list[dict] = field(default_factory=list, repr=False)  # final renders per view: colour, albedo, opacity
 
     @property
     def psnr(self) -> float:
@@ -68,7 +69,8 @@ class OverfitResult:
         return float(np.mean(self.albedo_psnr_per_view))
 
     def to_dict(self) -> dict:
-        return {**asdict(self), "psnr": self.psnr, "albedo_psnr": self.albedo_psnr}
+        d = {k: v for k, v in asdict(self).items() if k != "renders"}
+        return {**d, "psnr": self.psnr, "albedo_psnr": self.albedo_psnr}
 
 
 def render_training_views(config: OverfitConfig) -> ObjectViews:
@@ -148,12 +150,14 @@ def run_overfit(config: OverfitConfig = OverfitConfig(), views: ObjectViews | No
         history.append(record)
         if progress:
             progress(record)
-    psnrs, albedo_psnrs = evaluate(model, views, config, inverse_beta(config, config.steps))
-    return OverfitResult(asdict(config), history, psnrs, albedo_psnrs, train_seconds, train_seconds / max(len(history), 1))
+    renders: list[dict] = []
+    psnrs, albedo_psnrs = evaluate(model, views, config, inverse_beta(config, config.steps), renders)
+    return OverfitResult(asdict(config), history, psnrs, albedo_psnrs, train_seconds, train_seconds / max(len(history), 1), renders)
 
 
 @torch.no_grad()
-def evaluate(model: LIRM, views: ObjectViews, config: OverfitConfig, inv_beta: float) -> tuple[list[float], list[float]]:
+def evaluate(model: LIRM, views: ObjectViews, config: OverfitConfig, inv_beta: float,
+             renders: list[dict] | None = None) -> tuple[list[float], list[float]]:
     """Full renders of the input views: PSNR of colour over white, albedo PSNR on the true mask."""
     was_training = model.training
     model.eval()
@@ -162,6 +166,8 @@ def evaluate(model: LIRM, views: ObjectViews, config: OverfitConfig, inv_beta: f
     psnrs, albedo_psnrs = [], []
     for i, camera in enumerate(views.cameras):
         out = render_camera(field_, camera, render)
+        if renders is not None:
+            renders.append({"colour": out["colour"], "albedo": out["albedo"], "opacity": out["opacity"]})
         psnrs.append(psnr(np.clip(out["colour"], 0, 1), views.image[i]))
         inside = views.mask[i] > 0.99
         coverage = views.mask[i][..., None]
@@ -169,3 +175,16 @@ def evaluate(model: LIRM, views: ObjectViews, config: OverfitConfig, inv_beta: f
         albedo_psnrs.append(scaled_albedo_psnr(out["albedo"], true_albedo, inside))
     model.train(was_training)
     return psnrs, albedo_psnrs
+
+
+def comparison_sheet(views: ObjectViews, result: OverfitResult) -> np.ndarray:
+    """Rows: true image, rendered colour, true albedo, rendered albedo (sRGB-encoded, over white);
+    one column per input view."""
+    rows = [[], [], [], []]
+    for i, render in enumerate(result.renders):
+        coverage = views.mask[i][..., None]
+        true_albedo = views.albedo[i] + (1.0 - coverage)
+        albedo = render["albedo"] * render["opacity"][..., None] + (1.0 - render["opacity"][..., None])
+        for row, image in zip(rows, (views.image[i], render["colour"], true_albedo ** (1 / 2.2), albedo ** (1 / 2.2))):
+            row.append(np.clip(image, 0.0, 1.0))
+    return np.concatenate([np.concatenate(row, axis=1) for row in rows], axis=0)

@@ -141,3 +141,12 @@ def test_memory_does_not_grow_over_eight_updates():
     assert len(peaks) == 8 and abs(peaks[-1] / peaks[0] - 1.0) < 0.05, peaks
     assert all(u["state_storage_bytes"] == u["state_bytes"] for u in result.updates)
     assert len({u["state_bytes"] for u in result.updates}) == 1
+
+
+def test_bench_model_command(tmp_path, capsys):
+    from lirm.engine.cli import main
+
+    assert main(["bench", "model", "--preset", "tiny", "--updates", "2", "--no-baseline", "--json", str(tmp_path / "m.json")]) == 0
+    figures = json.loads((tmp_path / "m.json").read_text())
+    assert figures["preset"] == "tiny" and len(figures["updates"]) == 2
+    assert all(u["seconds"] > 0 and u["peak_memory_bytes"] > 0 for u in figures["updates"])

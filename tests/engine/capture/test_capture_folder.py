@@ -28,6 +28,7 @@ def _capture(tmp_path: Path) -> Capture:
         capture.cameras[fid] = Camera.from_fov(64, 48, 50.0, look_at((np.sin(i), -3.0, 0.5), (0, 0, 0)))
     capture.normalization = estimate_normalization(capture.cameras)
     capture.points = np.random.default_rng(0).normal(size=(10, 3))
+    capture.observations = {"0001": np.array([0, 3, 7]), "0002": np.array([1, 3])}
     capture.reports.append(FileReport(Path("/photos/bad.jpg"), False, "not a JPEG"))
     capture.log("posed", registered=3)
     return capture
@@ -45,6 +46,8 @@ def test_save_and_reopen(tmp_path):
     assert again.cameras["0003"].allclose(capture.cameras["0003"])
     np.testing.assert_allclose(again.normalization.world_from_source, capture.normalization.world_from_source)
     np.testing.assert_allclose(again.points, capture.points)
+    assert sorted(again.observations) == ["0001", "0002"]
+    np.testing.assert_array_equal(again.observations["0001"], [0, 3, 7])
     assert again.reports[0].reason == "not a JPEG"
     assert [h["action"] for h in again.history] == ["created", "posed"]
     np.testing.assert_array_equal(again.read_mask("0002"), mask)

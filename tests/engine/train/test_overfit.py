@@ -27,3 +27,18 @@ def test_the_loss_falls_when_overfitting_one_object():
     assert np.isfinite(losses).all()
     assert losses[-8:].mean() < 0.6 * losses[:8].mean(), losses
     assert np.isfinite(result.psnr) and result.psnr > 10
+
+
+def test_bench_capacity_command_writes_figures_and_a_sheet(tmp_path, capsys):
+    import json
+
+    from lirm.engine.cli import main
+
+    assert main(["bench", "capacity", "--steps", "3", "--json", str(tmp_path / "capacity.json")]) == 0
+    figures = json.loads((tmp_path / "capacity.json").read_text())
+    assert len(figures["history"]) == 3 and len(figures["psnr_per_view"]) == 4 and np.isfinite(figures["psnr"])
+    import cv2
+
+    sheet = cv2.imread(str(tmp_path / "capacity.png"))
+    assert sheet.shape == (4 * 64, 4 * 64, 3)
+    assert "input-view PSNR" in capsys.readouterr().out
