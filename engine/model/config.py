@@ -89,10 +89,10 @@ class LIRMConfig:
 PRESETS: dict[str, LIRMConfig] = {
     "tiny": LIRMConfig(name="tiny", width=64, depth=2, heads=4, image_size=64, patch=8, plane_tokens=4, plane_patch=8,
                        plane_channels=16, nde_tokens=4, nde_panoramas=2, nde_patch=4, nde_channels=8, head_hidden=32),
-    # small: the defaults above, with 16x16 image patches and 12x12 tokens per plane (96^2 planes) so
-    # that a 4-view update fits the 2 s target on a 2-core CPU: 8x8 patches and 16x16 plane tokens
-    # (5696 tokens, 424 GFLOP) took 5.1 s; this has 1952 tokens and about a fifth of the FLOPs.
-    "small": LIRMConfig(patch=16, plane_tokens=12),
+    # small: the defaults above with 16x16 image patches, so that a 4-view update fits the 2 s
+    # target on a 2-core CPU: 8x8 patches (5696 tokens, 424 GFLOP) took 3.5 s per update; 16x16
+    # patches (2624 tokens, 123 GFLOP) take 0.95 s (lirm bench model --preset small).
+    "small": LIRMConfig(patch=16),
     # Paper §3.4: 24 blocks x 1024 wide, 16 heads of 64; 48x48 tokens per hexa-plane, 64 channels, 384^2
     # planes; 32x32 NDE tokens -> 4 panoramas of 128^2; 512^2 inputs with 8x8 patches.
     "paper": LIRMConfig(name="paper", width=1024, depth=24, heads=16, image_size=512, patch=8, plane_tokens=48,
