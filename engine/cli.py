@@ -99,6 +99,12 @@ def build_parser() -> argparse.ArgumentParser:
     bk.add_argument("--steps", type=int, default=1500, help="training steps (default 1500)")
     bk.add_argument("--json", type=Path, help="also write the figures and the loss history to this JSON file")
     bk.set_defaults(run=_run_bench_capacity)
+    bs = bench_sub.add_parser("synth", help="synthetic training views per second, and a contact sheet of them")
+    bs.add_argument("--scenes", type=int, default=4, help="scenes to generate (default 4)")
+    bs.add_argument("--views", type=int, default=8, help="views per scene (default 8; training uses 32)")
+    bs.add_argument("--size", type=int, default=256, help="image side in pixels (default 256)")
+    bs.add_argument("--sheet", type=Path, help="write a contact sheet PNG here (image, background, albedo, roughness, metallic, normal per view)")
+    bs.set_defaults(run=_run_bench_synth)
     br = bench_sub.add_parser("render", help="renderer speed: environment preprocessing and G-buffer frames per second")
     br.add_argument("--model", default="vase", help="model file or built-in object (the issue's figures use DamagedHelmet)")
     br.add_argument("--env", default="studio", help="built-in environment or .hdr/.exr (the issue's figures use a 1k HDR)")
@@ -348,6 +354,22 @@ def _run_bench_capacity(args: argparse.Namespace) -> int:
         atomic_write_json(args.json, result.to_dict())
         sheet = write_png(args.json.with_suffix(".png"), to_uint8(comparison_sheet(views, result)))
         print(f"figures written to {args.json}; renders against the truth (rows: image, render, albedo, rendered albedo) in {sheet}")
+    return 0
+
+
+def _run_bench_synth(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from .bench.synth_bench import SynthBenchConfig, run_synth_bench
+
+    if min(args.scenes, args.views, args.size) < 1:
+        raise LirmUserError("--scenes, --views and --size must be at least 1")
+    base = SynthBenchConfig()
+    config = replace(base, scenes=args.scenes, scene=replace(base.scene, views=args.views, size=args.size), sheet_path=args.sheet)
+    result = run_synth_bench(config, progress=lambda message: print(message, file=sys.stderr))
+    print(result.table())
+    if result.sheet:
+        print(f"contact sheet: {result.sheet}")
     return 0
 
 

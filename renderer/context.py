@@ -32,7 +32,16 @@ def create_headless_context(require: int = REQUIRED_GL_VERSION) -> moderngl.Cont
             "`apt-get install libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri` (`make setup` does this); "
             "on an NVIDIA machine set __EGL_VENDOR_LIBRARY_FILENAMES to the driver's 10_nvidia.json."
         ) from exc
+    ctx.extra = {"headless": True}
     return ctx
+
+
+def make_current(ctx: moderngl.Context) -> None:
+    """Make a headless context current in this thread again. Creating (or releasing) another EGL
+    context makes that one current, after which this context's draws would silently go nowhere;
+    a window's context is left to its toolkit, which owns its currency."""
+    if isinstance(ctx.extra, dict) and ctx.extra.get("headless"):
+        ctx.__enter__()
 
 
 def context_from_current_window(require: int = REQUIRED_GL_VERSION) -> moderngl.Context:

@@ -17,6 +17,7 @@ from types import SimpleNamespace
 import moderngl
 import numpy as np
 
+from .context import make_current
 from .camera_matrices import gl_bytes, near_far_for_bounds, view_projection_matrix
 from .environment import rotation_about_z
 from .gpu_scene import GpuScene
@@ -84,9 +85,11 @@ class PBRRenderer:
 
     # ---- resources -------------------------------------------------------------------------
     def upload(self, meshes: list[MeshData], transform: np.ndarray | None = None) -> GpuScene:
+        make_current(self.ctx)
         return GpuScene(self.ctx, self.mesh_program, meshes, transform)
 
     def prepare_lighting(self, environment, rotation_deg: float = 0.0, intensity_ev: float = 0.0) -> Lighting:
+        make_current(self.ctx)
         return Lighting(self.baker.bake(environment), rotation_deg, intensity_ev)
 
     # ---- offscreen ---------------------------------------------------------------------------
@@ -94,6 +97,7 @@ class PBRRenderer:
         return [self.render_view(scene, cam, lighting, settings) for cam in cameras]
 
     def render_view(self, scene: GpuScene, camera, lighting: Lighting, settings: RenderSettings = RenderSettings()) -> RenderOutput:
+        make_current(self.ctx)
         k = int(settings.supersample)
         cam = _scaled_camera(camera, k) if k > 1 else camera
         target = self._target(int(cam.width), int(cam.height))

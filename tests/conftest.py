@@ -30,6 +30,16 @@ def gl_context():
 
 
 @pytest.fixture(scope="session")
+def renderer(gl_context):
+    """One PBRRenderer for the whole session (program compilation is slow on llvmpipe)."""
+    from lirm.renderer.pbr_renderer import PBRRenderer
+
+    r = PBRRenderer(gl_context)
+    yield r
+    r.release()
+
+
+@pytest.fixture(scope="session")
 def x_display():
     """An X display for window tests: $DISPLAY if set, else a private Xvfb started for the session."""
     import shutil

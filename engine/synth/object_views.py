@@ -9,7 +9,7 @@ FoV 50 degrees, at the distance where the bounding sphere just fits.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -19,7 +19,8 @@ from lirm.engine.cameras import Camera, distance_to_cover_sphere, orbit_camera
 from lirm.engine.model.lirm import ViewBatch
 from lirm.engine.orbit_render import normalizing_transform
 from lirm.renderer.environment import Environment
-from lirm.renderer.pbr_renderer import PBRRenderer, RenderSettings
+from lirm.renderer.mesh import MeshData
+from lirm.renderer.pbr_renderer import Lighting, PBRRenderer, RenderSettings
 
 
 @dataclass(frozen=True)
@@ -63,21 +64,30 @@ def render_object_views(renderer: PBRRenderer, environment: Environment, cameras
     model = resolve_asset(config.object_name, seed=config.seed)
     transform = normalizing_transform(model.bounds)
     transform[:3] *= config.object_radius
-    scene = renderer.upload(model.meshes, transform)
     lighting = renderer.prepare_lighting(environment)
-    settings = RenderSettings(supersample=config.supersample)
+    try:
+        return render_meshes(renderer, lighting, model.meshes, transform, cameras, config.supersample)
+    finally:
+        lighting.maps.release()
+
+
+def render_meshes(renderer: PBRRenderer, lighting: Lighting, meshes: list[MeshData], transform: np.ndarray,
+                  cameras: list[Camera], supersample: int = 2, exposure_ev: float = 0.0) -> ObjectViews:
+    """Every camera (all of one size) of the meshes under prepared lighting, with the G-buffer."""
+    sizes = {(c.width, c.height) for c in cameras}
+    if len(sizes) != 1:
+        raise ValueError(f"the cameras must share one image size, got {sorted(sizes)}")
+    scene = renderer.upload(meshes, transform)
+    settings = RenderSettings(supersample=supersample, exposure_ev=exposure_ev)
     # On black, the supersampled beauty is the object premultiplied by its coverage.
-    on_black = RenderSettings(supersample=config.supersample, show_environment=False, clear_color=(0.0, 0.0, 0.0))
+    on_black = replace(settings, show_environment=False, clear_color=(0.0, 0.0, 0.0))
     outs, premultiplied = [], []
     try:
         for camera in cameras:
-            if (camera.width, camera.height) != (config.size, config.size):
-                raise ValueError(f"cameras must be {config.size}x{config.size}, got {camera.width}x{camera.height}")
             outs.append(renderer.render_view(scene, camera, lighting, settings))
             premultiplied.append(renderer.render_view(scene, camera, lighting, on_black).beauty)
     finally:
         scene.release()
-        lighting.maps.release()
     mask = np.stack([o.mask for o in outs]).astype(np.float32)
     image_bg = np.stack([o.beauty for o in outs]).astype(np.float32)
     # With the environment on it is the photo; over white is what the capture's crop gives.

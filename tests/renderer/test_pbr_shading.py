@@ -230,3 +230,14 @@ def test_back_faces_are_culled_unless_double_sided(renderer, uniform_lighting):
     assert double.mask.mean() > 0.5
     # Seen from behind, a double-sided surface shades with the flipped normal (facing the camera).
     np.testing.assert_allclose(double.normal[double.mask > 0.99].mean(axis=0), np.array([0.0, 0.0, -1.0]), atol=1e-3)
+
+
+def test_rendering_survives_another_headless_context_made_and_released(renderer, uniform_lighting):
+    """Synthetic data and benchmarks make their own contexts; EGL then leaves that one current and
+    the renderer must make its own current again rather than draw nowhere."""
+    from lirm.renderer.context import create_headless_context
+
+    other = create_headless_context()
+    other.release()
+    out = render_one(renderer, [uv_sphere(material=PBRMaterial(base_color_factor=(1.0, 1.0, 1.0, 1.0)))], front_camera(), uniform_lighting)
+    assert (out.mask > 0.5).sum() > 2000
