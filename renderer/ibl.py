@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import moderngl
 import numpy as np
 
+from .context import make_current
 from .environment import Environment
 from .shader_source import shader_source
 
@@ -74,6 +75,7 @@ class IBLBaker:
     """Owns the compute programs and the BRDF table for one GL context."""
 
     def __init__(self, ctx: moderngl.Context, config: IBLConfig = IBLConfig()):
+        make_current(ctx)
         self.ctx = ctx
         self.config = config
         self._to_cube = ctx.compute_shader(shader_source("equirect_to_cube.comp"))
@@ -83,6 +85,7 @@ class IBLBaker:
 
     @property
     def brdf_lut(self) -> moderngl.Texture:
+        make_current(self.ctx)
         if self._brdf_lut is None:
             self._brdf_lut = self._compute_brdf_lut()
         return self._brdf_lut
@@ -102,6 +105,7 @@ class IBLBaker:
         return lut
 
     def bake(self, environment: Environment) -> IBLMaps:
+        make_current(self.ctx)
         cfg = self.config
         ctx = self.ctx
         timings: dict[str, float] = {}

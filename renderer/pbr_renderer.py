@@ -74,6 +74,7 @@ class RenderOutput:
 
 class PBRRenderer:
     def __init__(self, ctx: moderngl.Context, ibl_config: IBLConfig = IBLConfig()):
+        make_current(ctx)
         self.ctx = ctx
         self.mesh_program = ctx.program(vertex_shader=shader_source("mesh.vert"), fragment_shader=shader_source("mesh_pbr.frag"))
         self.background_program = ctx.program(vertex_shader=shader_source("fullscreen.vert"), fragment_shader=shader_source("background.frag"))
