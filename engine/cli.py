@@ -329,8 +329,9 @@ def _run_bench_capacity(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from .io.atomic_files import atomic_write_json
+    from .io.images import to_uint8, write_png
     from .synth.object_views import ObjectViewsConfig
-    from .train.overfit import OverfitConfig, run_overfit
+    from .train.overfit import OverfitConfig, comparison_sheet, render_training_views, run_overfit
 
     if args.steps < 1:
         raise LirmUserError("--steps must be at least 1")
@@ -341,9 +342,6 @@ def _run_bench_capacity(args: argparse.Namespace) -> int:
         if "psnr" in record:
             print(f"step {record['step']}: loss {record['loss']:.5f}, input-view PSNR {record['psnr']:.2f} dB, "
                   f"albedo PSNR {record['albedo_psnr']:.2f} dB", file=sys.stderr)
-
-    from .io.images import to_uint8, write_png
-    from .train.overfit import comparison_sheet, render_training_views
 
     views = render_training_views(config)
     result = run_overfit(config, views, progress=progress)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -41,6 +42,16 @@ class ViewBatch:
     image: torch.Tensor  # (B, V, 3, H, W) masked image
     image_bg: torch.Tensor  # (B, V, 3, H, W) background image
     plucker: torch.Tensor  # (B, V, 6, H, W)
+
+    @classmethod
+    def from_arrays(cls, images, backgrounds, pluckers, device: torch.device | str = "cpu") -> "ViewBatch":
+        """One scene's views from channel-last arrays, (V, H, W, 3), (V, H, W, 3), (V, H, W, 6)."""
+
+        def tensor(a) -> torch.Tensor:
+            t = torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32)).permute(0, 3, 1, 2)  # (V, C, H, W)
+            return t.unsqueeze(0).to(device)
+
+        return cls(tensor(images), tensor(backgrounds), tensor(pluckers))
 
 
 class LIRM(nn.Module):

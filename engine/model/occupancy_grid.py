@@ -46,11 +46,12 @@ class OccupancyGrid:
         centres_1d = (torch.arange(g, dtype=torch.float32) + 0.5) * voxel - radius
         half_diagonal = 0.5 * math.sqrt(3.0) * voxel
         occupied = torch.empty(g * g * g, dtype=torch.bool)
-        ix, iy, iz = torch.meshgrid(centres_1d, centres_1d, centres_1d, indexing="ij")
-        centres = torch.stack([ix, iy, iz], dim=-1).reshape(-1, 3)
         device = _device_of(field)
-        for start in range(0, centres.shape[0], config.chunk):
-            p = centres[start:start + config.chunk].to(device)
+        for start in range(0, g * g * g, config.chunk):
+            # Voxel centres of this chunk from their flat [ix, iy, iz] indices (the whole 250^3 grid
+            # of coordinates would be 190 MB).
+            flat = torch.arange(start, min(start + config.chunk, g * g * g))
+            p = centres_1d[torch.stack([flat // (g * g), flat // g % g, flat % g], dim=-1)].to(device)
             s = field.sdf(p[None])[0]
             # The closest the surface can be to any point of the voxel, signed toward "inside".
             s_best = torch.where(s > 0, (s - half_diagonal).clamp(min=0.0), s)

@@ -53,8 +53,7 @@ def load_model(checkpoint: str | Path | None = None, preset_name: str = "small",
     if shipped is not None:
         model, extra = load_checkpoint(shipped, expected=preset_name, device=device)
         return ModelSource(model, bool(extra.get("trained", False)), f"shipped checkpoint {shipped.name}", extra)
-    generator_state = torch.random.get_rng_state()
-    torch.manual_seed(seed)  # the same untrained weights every run, without disturbing the caller's RNG
-    model = LIRM(preset(preset_name)).to(device).eval()
-    torch.random.set_rng_state(generator_state)
+    with torch.random.fork_rng(devices=[]):  # the same untrained weights every run, the caller's RNG untouched
+        torch.manual_seed(seed)
+        model = LIRM(preset(preset_name)).to(device).eval()
     return ModelSource(model, False, f"untrained '{preset_name}' weights (seed {seed})", {"trained": False})

@@ -93,7 +93,8 @@ def render_rays(field, origins: torch.Tensor, directions: torch.Tensor, config: 
     if stats is not None:
         stats.samples_total += int(hit.sum()) * s
         stats.samples_evaluated += int(keep.sum())
-    ray_index = keep.nonzero()[:, 0]
+    kept_index = keep.nonzero(as_tuple=True)  # (ray, sample) of every kept sample
+    ray_index = kept_index[0]
     kept_points = points[keep]
     kept_dirs = directions[ray_index]
 
@@ -103,7 +104,7 @@ def render_rays(field, origins: torch.Tensor, directions: torch.Tensor, config: 
     if kept_points.shape[0]:
         sample = field.sample(kept_points[None], kept_dirs[None])
         sigma = torch.zeros(n, s, device=device, dtype=origins.dtype)
-        sigma = sigma.index_put((keep.nonzero(as_tuple=True)), volsdf_density(sample.sdf[0], config.beta) / config.beta)
+        sigma = sigma.index_put(kept_index, volsdf_density(sample.sdf[0], config.beta) / config.beta)
         alpha = 1.0 - torch.exp(-sigma * delta)
         transmittance = torch.cumprod(torch.cat([torch.ones_like(alpha[:, :1]), 1.0 - alpha[:, :-1] + 1e-10], dim=1), dim=1)
         w = (alpha * transmittance)[keep][:, None]  # (K, 1)

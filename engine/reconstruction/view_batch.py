@@ -32,8 +32,4 @@ def view_batch(views: list[PreparedView], size: int, device: torch.device | str 
             backgrounds.append(cv2.resize(view.image_bg, (size, size), interpolation=interpolation))
             pluckers.append(view.camera.resized(size, size).plucker())
 
-    def stack(arrays: list[np.ndarray]) -> torch.Tensor:
-        t = torch.from_numpy(np.stack(arrays).astype(np.float32)).permute(0, 3, 1, 2)  # (V, C, H, W)
-        return t.unsqueeze(0).to(device)
-
-    return ViewBatch(stack(images), stack(backgrounds), stack(pluckers))
+    return ViewBatch.from_arrays(np.stack(images), np.stack(backgrounds), np.stack(pluckers), device)

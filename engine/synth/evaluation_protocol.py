@@ -12,7 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lirm.engine.cameras import Camera, distance_to_cover_sphere, orbit_camera
+from lirm.engine.cameras import Camera
+
+from .object_views import protocol_cameras
 
 ELEVATIONS_DEG = (0.0, 20.0, 40.0)
 AZIMUTHS = 16
@@ -44,14 +46,9 @@ def protocol_views(config: ProtocolConfig = ProtocolConfig(), object_index: int 
     if needed > 2 * AZIMUTHS:
         raise ValueError(f"{config.input_sets} sets of {config.views_per_set} inputs need {needed} views; "
                          f"the 20 and 40 degree rings have {2 * AZIMUTHS}")
-    distance = distance_to_cover_sphere(config.radius, config.fov_deg)
-    cameras, elevations, azimuths = [], [], []
-    for elevation in ELEVATIONS_DEG:
-        for step in range(AZIMUTHS):
-            azimuth = 360.0 * step / AZIMUTHS
-            cameras.append(orbit_camera(azimuth, elevation, distance, config.size, config.size, config.fov_deg, axis="min"))
-            elevations.append(elevation)
-            azimuths.append(azimuth)
+    elevations = [e for e in ELEVATIONS_DEG for _ in range(AZIMUTHS)]
+    azimuths = [360.0 * step / AZIMUTHS for _ in ELEVATIONS_DEG for step in range(AZIMUTHS)]
+    cameras = protocol_cameras(azimuths, elevations, config.size, config.fov_deg, config.radius)
     rng = np.random.default_rng([config.seed, object_index])
     candidates = [i for i, e in enumerate(elevations) if e in (20.0, 40.0)]
     chosen = [int(i) for i in rng.choice(candidates, size=needed, replace=False)]

@@ -46,16 +46,14 @@ class ObjectViews:
 
     def view_batch(self, indices: list[int] | None = None, device: str | torch.device = "cpu") -> ViewBatch:
         idx = list(range(len(self.cameras))) if indices is None else list(indices)
-
-        def t(a: np.ndarray) -> torch.Tensor:
-            return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32)).permute(0, 3, 1, 2).unsqueeze(0).to(device)
-
         plucker = np.stack([self.cameras[i].plucker() for i in idx])
-        return ViewBatch(t(self.image[idx]), t(self.image_bg[idx]), t(plucker))
+        return ViewBatch.from_arrays(self.image[idx], self.image_bg[idx], plucker, device)
 
 
-def protocol_cameras(azimuths_deg: list[float], elevations_deg: list[float], size: int, fov_deg: float = 50.0) -> list[Camera]:
-    distance = distance_to_cover_sphere(1.0, fov_deg)
+def protocol_cameras(azimuths_deg: list[float], elevations_deg: list[float], size: int, fov_deg: float = 50.0,
+                     radius: float = 1.0) -> list[Camera]:
+    """Cameras looking at the origin from where the sphere of `radius` just fills the field of view."""
+    distance = distance_to_cover_sphere(radius, fov_deg)
     return [orbit_camera(a, e, distance, size, size, fov_deg, axis="min") for a, e in zip(azimuths_deg, elevations_deg)]
 
 

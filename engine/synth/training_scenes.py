@@ -20,11 +20,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lirm.engine.assets.asset_source import resolve_asset
+from lirm.engine.assets.environment_files import resolve_environment
 from lirm.engine.cameras import Camera, distance_to_cover_sphere, orbit_camera
 from lirm.engine.orbit_render import normalizing_transform
 from lirm.renderer.environment import Environment
+from lirm.renderer.mesh import MeshData
 from lirm.renderer.pbr_renderer import PBRRenderer
-from lirm.renderer.procedural_environments import PROCEDURAL_ENVIRONMENTS, make_procedural_environment
+from lirm.renderer.procedural_environments import LUMINANCE_WEIGHTS, PROCEDURAL_ENVIRONMENTS
 
 from .object_views import ObjectViews, render_meshes
 from .procedural_objects import BUILTIN_OBJECTS
@@ -89,7 +91,7 @@ def auto_exposure_ev(environment: Environment) -> float:
     h = environment.height
     weights = np.cos((np.arange(h) + 0.5) / h * np.pi - np.pi / 2.0)[:, None]
     rgb = environment.radiance.astype(np.float64)
-    luminance = rgb @ np.array([0.2126, 0.7152, 0.0722])
+    luminance = rgb @ LUMINANCE_WEIGHTS
     mean = float((luminance * weights).sum() / (weights.sum() * environment.width))
     return float(-np.log2(max(mean, 1e-8)))
 
@@ -105,7 +107,7 @@ def make_training_scene(renderer: PBRRenderer, seed: int, config: TrainingSceneC
     env_name = str(rng.choice(config.environments))
     env_rotation = float(rng.uniform(0.0, 360.0))
     tint = rng.uniform(1.0 - config.white_balance, 1.0 + config.white_balance, 3)
-    tint = tint / (tint @ np.array([0.2126, 0.7152, 0.0722]))  # a colour shift, not a brightness change
+    tint = tint / (tint @ LUMINANCE_WEIGHTS)  # a colour shift, not a brightness change
     # Both drawn every time, so the specular copy of a seed differs from the original only in roughness.
     specular = bool(rng.uniform() < config.specular_copy_probability)
     specular_scale = float(rng.uniform(*config.specular_roughness_scale))
@@ -113,17 +115,14 @@ def make_training_scene(renderer: PBRRenderer, seed: int, config: TrainingSceneC
     cameras, camera_params = sample_cameras(rng, config)
 
     model = resolve_asset(object_name, seed=variant)
-    meshes = [copy.deepcopy(m) for m in model.meshes]
-    for mesh in meshes:
-        mesh.material = copy.copy(mesh.material)
-        mesh.material.roughness_factor = float(mesh.material.roughness_factor) * roughness_scale
+    meshes = model.meshes if roughness_scale == 1.0 else [_with_roughness_scaled(m, roughness_scale) for m in model.meshes]
     transform = normalizing_transform(model.bounds)
     c, s = np.cos(np.radians(turn)), np.sin(np.radians(turn))
     turn_z = np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
     transform = turn_z @ transform
     transform[:3] *= radius
 
-    environment = (environments or {}).get(env_name) or _environment(env_name, config.environment_width)
+    environment = (environments or {}).get(env_name) or resolve_environment(env_name, width=config.environment_width)
     tinted = Environment(environment.radiance * tint.astype(np.float32), name=f"{environment.name}*tint")
     exposure = auto_exposure_ev(environment)
     lighting = renderer.prepare_lighting(tinted, rotation_deg=env_rotation)
@@ -136,9 +135,10 @@ def make_training_scene(renderer: PBRRenderer, seed: int, config: TrainingSceneC
     return TrainingScene(description, views)
 
 
-def _environment(name: str, width: int) -> Environment:
-    if name in PROCEDURAL_ENVIRONMENTS:
-        return make_procedural_environment(name, width=width)
-    from lirm.engine.assets.environment_files import load_environment_file
-
-    return load_environment_file(name)
+def _with_roughness_scaled(mesh: MeshData, scale: float) -> MeshData:
+    """A shallow copy sharing the geometry and textures, with its own scaled material (glTF's
+    roughness is factor x texture, so scaling the factor scales every texel)."""
+    scaled = copy.copy(mesh)
+    scaled.material = copy.copy(mesh.material)
+    scaled.material.roughness_factor = float(mesh.material.roughness_factor) * scale
+    return scaled
