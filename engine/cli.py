@@ -82,6 +82,40 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument("--grid-resolution", type=int, default=128, help="occupancy grid voxels per side for those renders (default 128; the paper uses 250)")
     rec.set_defaults(run=_run_reconstruct)
 
+    tr = sub.add_parser("train", help="train LIRM on synthetic scenes: one stage of the coarse-to-fine schedule (torchrun for many GPUs)")
+    tr.add_argument("--preset", default="tiny", choices=["tiny", "small", "paper"], help="model and schedule size (default tiny)")
+    tr.add_argument("--stage", type=int, default=1, choices=[1, 2, 3], help="stage of the supplementary's schedule (default 1)")
+    tr.add_argument("--max-steps", type=int, help="stop after this step (the schedules still span the whole stage)")
+    tr.add_argument("--stage-steps", type=int, help="shorten the stage to this many steps (schedules compressed)")
+    tr.add_argument("--resume", type=Path, help="checkpoint to continue (same stage: exactly) or to start this stage from")
+    tr.add_argument("--out", type=Path, default=Path("runs/lirm"), help="run folder: metrics.csv, eval.csv, tensorboard/, checkpoints")
+    tr.add_argument("--models", type=Path, help="also train on the glTF/glb models under this folder")
+    tr.add_argument("--environments", type=Path, help="also light scenes with the .hdr/.exr files under this folder")
+    tr.add_argument("--no-builtin-objects", action="store_true", help="only the --models folder's objects")
+    tr.add_argument("--scene-pool", type=int, default=0, help="draw scenes from this many seeds (0: a new scene every time)")
+    tr.add_argument("--cache", type=Path, help="keep rendered scenes in this folder (useful with --scene-pool)")
+    tr.add_argument("--data-seed", type=int, default=0, help="seed of the scenes and of every random choice of the data")
+    tr.add_argument("--checkpoint-every", type=int, default=100, help="steps between checkpoints (default 100)")
+    tr.add_argument("--eval-every", type=int, default=0, help="steps between held-out evaluations (default 0: none)")
+    tr.add_argument("--eval-objects", type=int, default=2, help="held-out objects in those evaluations (default 2)")
+    tr.add_argument("--workers", type=int, default=0, help="data-loader processes rendering scenes (default 0: in the training process)")
+    tr.add_argument("--device", default="auto", help="auto (CUDA when present), cpu or cuda")
+    tr.add_argument("--no-lpips", action="store_true", help="use the SSIM + gradient loss even when LPIPS could run")
+    tr.set_defaults(run=_run_train)
+
+    ev = sub.add_parser("eval", help="the paper's metrics after updates 1-4 on a held-out set, as a Markdown table")
+    ev.add_argument("checkpoint", type=Path, help="model weights (.safetensors), e.g. a training checkpoint")
+    ev.add_argument("--set", default="synthetic", help="synthetic (default), gltf, or a capture folder")
+    ev.add_argument("--objects", type=int, default=4, help="objects of the synthetic set (default 4)")
+    ev.add_argument("--size", type=int, default=128, help="side of the protocol views in pixels (default 128)")
+    ev.add_argument("--updates", type=int, default=4, help="updates to score (default 4)")
+    ev.add_argument("--output-views", type=int, help="score at most this many output views per object (default: all 12)")
+    ev.add_argument("--models", type=Path, default=Path("../shared/data/pbr_models"), help="glTF folder of the gltf set")
+    ev.add_argument("--environments", type=Path, default=Path("../shared/data/envmaps"), help="HDR folder of the gltf set")
+    ev.add_argument("--mesh-resolution", type=int, default=96, help="marching-cubes grid for the Chamfer distance (default 96)")
+    ev.add_argument("-o", "--out", type=Path, help="also write the table (.md) and the numbers (.json beside it)")
+    ev.set_defaults(run=_run_eval)
+
     bench = sub.add_parser("bench", help="benchmarks")
     bench_sub = bench.add_subparsers(title="benchmarks", metavar="BENCH", required=True)
     bm = bench_sub.add_parser("model", help="LIRM update loop: seconds, peak memory, tokens and FLOPs per update, and the all-views-at-once baseline")
@@ -289,6 +323,140 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
     if source.warning:
         print(source.warning, file=sys.stderr)
     return 0
+
+
+def _scene_config(args: argparse.Namespace, rank0: bool):
+    """Built-in objects and environments plus the user's folders (each file checked, bad ones reported)."""
+    from .synth.asset_folders import scan_environment_folder, scan_model_folder
+    from .synth.procedural_objects import BUILTIN_OBJECTS
+    from .synth.training_scenes import TrainingSceneConfig
+    from lirm.renderer.procedural_environments import PROCEDURAL_ENVIRONMENTS
+
+    objects = () if args.no_builtin_objects else tuple(BUILTIN_OBJECTS)
+    environments = tuple(PROCEDURAL_ENVIRONMENTS)
+    if args.models:
+        scan = scan_model_folder(args.models)
+        if rank0:
+            print(scan.report("glTF models"), file=sys.stderr)
+        objects += tuple(str(p) for p in scan.usable)
+    elif args.no_builtin_objects:
+        raise LirmUserError("--no-builtin-objects needs --models FOLDER: there would be nothing to train on")
+    if args.environments:
+        scan = scan_environment_folder(args.environments)
+        if rank0:
+            print(scan.report("environments"), file=sys.stderr)
+        environments += tuple(str(p) for p in scan.usable)
+    return TrainingSceneConfig(objects=objects, environments=environments)
+
+
+def _run_train(args: argparse.Namespace) -> int:
+    import os
+    from dataclasses import replace
+
+    from .model.config import preset as model_preset
+    from .train.trainer import TrainConfig, describe, run_training, scene_config_for
+
+    for name in ("max_steps", "stage_steps", "checkpoint_every"):
+        value = getattr(args, name)
+        if value is not None and value < 1:
+            raise LirmUserError(f"--{name.replace('_', '-')} must be at least 1")
+    rank0 = os.environ.get("RANK", "0") == "0"
+    size = model_preset(args.preset).image_size
+    scenes = replace(_scene_config(args, rank0), size=scene_config_for(size).size,
+                     environment_width=scene_config_for(size).environment_width)
+    config = TrainConfig(preset=args.preset, stage=args.stage, out_dir=str(args.out), max_steps=args.max_steps,
+                         stage_steps=args.stage_steps, resume=str(args.resume) if args.resume else None,
+                         data_seed=args.data_seed, scene_pool=args.scene_pool,
+                         cache_dir=str(args.cache) if args.cache else None, scenes=scenes, lpips=not args.no_lpips,
+                         checkpoint_every=args.checkpoint_every, eval_every=args.eval_every,
+                         eval_objects=args.eval_objects, workers=args.workers, device=args.device)
+    stage = config.stage_settings()
+    if rank0:
+        print(f"stage {args.stage} of '{args.preset}': {stage.steps} steps, lr {stage.learning_rate[0]:g} -> {stage.learning_rate[1]:g}, "
+              f"{stage.batch_scenes} scenes/step, {stage.update_sets} update sets, {stage.samples_per_ray} samples/ray, "
+              f"{stage.crop}px crops of {stage.target_resolution}px targets, 1/beta {stage.inv_beta[0]:g} -> {stage.inv_beta[1]:g}",
+              file=sys.stderr)
+    from tqdm import tqdm
+
+    bar = tqdm(desc=f"stage {args.stage}", unit="step", file=sys.stderr, disable=None if rank0 else True,
+               total=min(stage.steps, args.max_steps or stage.steps))
+
+    def progress(record: dict) -> None:
+        bar.n = record["step"]
+        bar.set_postfix(loss=f"{record['loss']:.4f}", refresh=False)
+        bar.refresh()
+
+    try:
+        result = run_training(config, progress=progress)
+    finally:
+        bar.close()
+    if rank0:
+        print(describe(result))
+        if result.stopped_early:
+            print(f"stopped at step {result.last_step}; continue with --resume {result.checkpoint}", file=sys.stderr)
+    return 0
+
+
+def _run_eval(args: argparse.Namespace) -> int:
+
+    from .evaluation.evaluate import EvalConfig, evaluate_heldout
+    from .evaluation.report import markdown_table
+    from .io.atomic_files import atomic_write, atomic_write_json
+    from .model.checkpoint import load_checkpoint
+
+    for name in ("objects", "size", "updates", "mesh_resolution"):
+        if getattr(args, name) < 1:
+            raise LirmUserError(f"--{name.replace('_', '-')} must be at least 1")
+    model, extra = load_checkpoint(args.checkpoint)
+    config = EvalConfig(updates=args.updates, output_views=args.output_views, mesh_resolution=args.mesh_resolution)
+    objects = _heldout_objects(args)
+    bar = _progress_bar(len(objects), "evaluating")
+    bar.unit = "object"
+
+    def progress(message: str, done: int, total: int) -> None:
+        bar.n = done
+        bar.set_description(message)
+        bar.refresh()
+
+    try:
+        result = evaluate_heldout(model, objects, config, set_name=args.set, progress=progress)
+    finally:
+        bar.close()
+    training = extra.get("training", {})
+    title = f"{args.checkpoint.name}: '{model.config.name}' model" + (
+        f", stage {training['stage']} step {training['step']}" if training else "")
+    table = markdown_table(result, title)
+    print(table)
+    if args.out:
+        atomic_write(args.out, lambda tmp: tmp.write_text(table, encoding="utf-8"))
+        atomic_write_json(args.out.with_suffix(".json"), {"checkpoint": str(args.checkpoint), **result.to_dict()})
+    return 0
+
+
+def _heldout_objects(args: argparse.Namespace):
+    from .evaluation.heldout_sets import capture_heldout, gltf_heldout, synthetic_heldout
+    from .synth.asset_folders import scan_environment_folder, scan_model_folder
+    from lirm.renderer.context import create_headless_context
+    from lirm.renderer.pbr_renderer import PBRRenderer
+
+    if args.set not in ("synthetic", "gltf"):
+        capture = Path(args.set)
+        if not (capture / "capture.json").exists():
+            raise LirmUserError(f"--set {args.set}: not 'synthetic', 'gltf' or a capture folder (no capture.json there)")
+        return capture_heldout(capture, sets=args.updates)
+    ctx = create_headless_context()
+    renderer = PBRRenderer(ctx)
+    try:
+        if args.set == "synthetic":
+            return synthetic_heldout(renderer, args.objects, args.size)
+        models, envs = scan_model_folder(args.models), scan_environment_folder(args.environments)
+        for scan, what in ((models, "glTF models"), (envs, "environments")):
+            if scan.problems:
+                print(scan.report(what), file=sys.stderr)
+        return gltf_heldout(renderer, models.usable, envs.usable, args.size)
+    finally:
+        renderer.release()
+        ctx.release()
 
 
 def _run_demo(args: argparse.Namespace) -> int:

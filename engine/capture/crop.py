@@ -59,15 +59,15 @@ def prepare_view(frame_id: str, image: np.ndarray, mask: np.ndarray, camera: Cam
                          f"{camera.width}x{camera.height} must agree")
     x0, y0, side = crop_box_for_mask(mask, config.margin)
     s = config.size
-    rgb = _crop_resize(image.astype(np.float32) / 255.0, x0, y0, side, s)
-    alpha = _crop_resize(mask.astype(np.float32) / 255.0, x0, y0, side, s)
+    rgb = crop_resize_array(image.astype(np.float32) / 255.0, x0, y0, side, s)
+    alpha = crop_resize_array(mask.astype(np.float32) / 255.0, x0, y0, side, s)
     crop_camera = camera.crop_resize(x0, y0, side, side, s, s)
     masked = rgb * alpha[..., None] + config.background_value * (1.0 - alpha[..., None])
     return PreparedView(frame_id, masked.astype(np.float32), rgb.astype(np.float32), alpha.astype(np.float32),
                         crop_camera.plucker(), crop_camera, (x0, y0, side))
 
 
-def _crop_resize(a: np.ndarray, x0: int, y0: int, side: int, out: int) -> np.ndarray:
+def crop_resize_array(a: np.ndarray, x0: int, y0: int, side: int, out: int) -> np.ndarray:
     """The square [x0, x0+side) x [y0, y0+side), zero outside the image, area-resampled to out x out.
     Output pixel i covers input [x0 + i*side/out, x0 + (i+1)*side/out): Camera.crop_resize's mapping."""
     h, w = a.shape[:2]

@@ -25,11 +25,15 @@ from .lirm import LIRM
 
 FORMAT = "lirm-checkpoint/1"
 PICKLE_SUFFIXES = (".pt", ".pth", ".ckpt", ".bin", ".pkl")
+# Tensors under this prefix are a training run's state (optimizer moments), not the model's weights:
+# a training checkpoint is also a model checkpoint that every loader reads.
+TRAINING_PREFIX = "training."
 
 
 def save_checkpoint(model: LIRM, path: str | Path, *, dtype: torch.dtype | None = None,
-                    metadata: dict | None = None) -> Path:
-    """Write the model's weights (floating ones cast to `dtype` if given) and config to `path`."""
+                    metadata: dict | None = None, training_tensors: dict[str, torch.Tensor] | None = None) -> Path:
+    """Write the model's weights (floating ones cast to `dtype` if given) and config to `path`;
+    `training_tensors` (optimizer state) are stored as they are, under TRAINING_PREFIX."""
     path = Path(path)
     if path.suffix != ".safetensors":
         raise LirmUserError(f"cannot save checkpoint {path}: the file name must end in .safetensors")
@@ -38,6 +42,8 @@ def save_checkpoint(model: LIRM, path: str | Path, *, dtype: torch.dtype | None 
     tensors = {name: (t.detach().to("cpu", dtype) if dtype is not None and t.is_floating_point()
                       else t.detach().cpu()).contiguous().clone()
                for name, t in model.state_dict().items()}
+    for name, t in (training_tensors or {}).items():
+        tensors[TRAINING_PREFIX + name] = t.detach().cpu().contiguous().clone()
     # Refuse here rather than write a file that load_checkpoint would reject.
     bad = [n for n, t in tensors.items() if t.is_floating_point() and not torch.isfinite(t).all()]
     if bad:
@@ -69,7 +75,7 @@ def load_checkpoint(path: str | Path, *, expected: LIRMConfig | str | None = Non
         if expected is not None:
             _check_expected(path, config, expected)
         try:
-            tensors = {name: f.get_tensor(name) for name in f.keys()}
+            tensors = {name: f.get_tensor(name) for name in f.keys() if not name.startswith(TRAINING_PREFIX)}
         except (SafetensorError, OSError, RuntimeError, ValueError) as e:
             raise _corrupt(path, e) from None
     model = LIRM(config)
@@ -77,6 +83,17 @@ def load_checkpoint(path: str | Path, *, expected: LIRMConfig | str | None = Non
     # Shipped weights are fp16 for size; compute is float32.
     model.load_state_dict({n: t.float() if t.is_floating_point() else t for n, t in tensors.items()})
     return model.to(device).eval(), extra
+
+
+def load_training_tensors(path: str | Path) -> dict[str, torch.Tensor]:
+    """The training-state tensors of a checkpoint (without their prefix); empty for a model-only one."""
+    path = _check_path(path)
+    with _open(path) as f:
+        _parse_header(path, f.metadata())
+        try:
+            return {name[len(TRAINING_PREFIX):]: f.get_tensor(name) for name in f.keys() if name.startswith(TRAINING_PREFIX)}
+        except (SafetensorError, OSError, RuntimeError, ValueError) as e:
+            raise _corrupt(path, e) from None
 
 
 # ---- helpers ----------------------------------------------------------------------------------------

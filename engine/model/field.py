@@ -63,6 +63,11 @@ class Field:
         self.planes = planes
         self.panoramas = panoramas
 
+    def item(self, b: int) -> "Field":
+        """The field of batch entry `b` alone (the renderer takes one scene at a time)."""
+        panoramas = None if self.panoramas is None else self.panoramas[b:b + 1]
+        return Field(self.config, self.heads, self.planes[b:b + 1], panoramas)
+
     @property
     def radius(self) -> float:
         return self.config.radius

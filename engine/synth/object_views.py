@@ -43,6 +43,14 @@ class ObjectViews:
     roughness: np.ndarray  # (V, S, S)
     metallic: np.ndarray  # (V, S, S)
     normal: np.ndarray  # (V, S, S, 3) world normals, 0 off the object
+    depth: np.ndarray | None = None  # (V, S, S) camera-space z, 0 off the object
+
+    def select(self, indices) -> "ObjectViews":
+        """The views at `indices`, in that order."""
+        idx = list(indices)
+        pick = lambda a: None if a is None else a[idx]  # noqa: E731
+        return ObjectViews([self.cameras[i] for i in idx], pick(self.image), pick(self.image_bg), pick(self.mask),
+                           pick(self.albedo), pick(self.roughness), pick(self.metallic), pick(self.normal), pick(self.depth))
 
     def view_batch(self, indices: list[int] | None = None, device: str | torch.device = "cpu") -> ViewBatch:
         idx = list(range(len(self.cameras))) if indices is None else list(indices)
@@ -92,4 +100,5 @@ def render_meshes(renderer: PBRRenderer, lighting: Lighting, meshes: list[MeshDa
     image = np.stack(premultiplied) + (1.0 - mask[..., None])
     return ObjectViews(cameras, np.clip(image, 0, 1).astype(np.float32), np.clip(image_bg, 0, 1), mask,
                        np.stack([o.albedo for o in outs]).astype(np.float32), np.stack([o.roughness for o in outs]).astype(np.float32),
-                       np.stack([o.metallic for o in outs]).astype(np.float32), np.stack([o.normal for o in outs]).astype(np.float32))
+                       np.stack([o.metallic for o in outs]).astype(np.float32), np.stack([o.normal for o in outs]).astype(np.float32),
+                       np.stack([o.depth for o in outs]).astype(np.float32))

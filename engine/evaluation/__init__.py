@@ -1,0 +1,1 @@
+"""`lirm eval`: the paper's tables on held-out sets, after each progressive update."""

@@ -1,0 +1,138 @@
+"""The paper's evaluation after each progressive update: novel-view PSNR and SSIM (LPIPS when it
+can run), albedo PSNR with Stanford-ORB's per-channel scale, roughness and metallic PSNR on the
+object's pixels, and the Chamfer distance of the marching-cubes mesh to the true surface.
+
+The same state is updated with input set 1, 2, 3, 4 in turn; after each update every output view
+is volume-rendered and scored. Numbers are means over output views (images) or objects (Chamfer).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Callable
+
+import numpy as np
+import torch
+
+from lirm.engine.export.marching_cubes import extract_mesh
+from lirm.engine.metrics import psnr, scaled_albedo_psnr, ssim
+from lirm.engine.model.lirm import LIRM
+from lirm.engine.model.occupancy_grid import OccupancyConfig, OccupancyGrid
+from lirm.engine.model.volume_renderer import VolumeRenderConfig, render_camera
+from lirm.engine.synth.view_crops import crop_like_capture, resize_views
+from lirm.engine.train.perceptual import LPIPSLoss, lpips_available
+
+from .chamfer import chamfer_distance, surface_samples
+from .heldout_sets import HeldoutObject
+
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    updates: int = 4
+    render: VolumeRenderConfig = field(default_factory=lambda: VolumeRenderConfig(samples_per_ray=96, numerical_normals=False))
+    occupancy: OccupancyConfig = field(default_factory=lambda: OccupancyConfig(resolution=96))
+    mesh_resolution: int = 96
+    chamfer_points: int = 20_000
+    output_views: int | None = None  # at most this many output views per object (None: the protocol's 12)
+
+
+@dataclass
+class UpdateScores:
+    update: int
+    psnr: float
+    ssim: float
+    lpips: float | None
+    albedo_psnr: float | None
+    roughness_psnr: float | None
+    metallic_psnr: float | None
+    chamfer: float | None
+    views: int
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class EvalResult:
+    set_name: str
+    objects: list[str]
+    rows: list[UpdateScores]
+    lpips_note: str  # why LPIPS is absent, or "" when it was computed
+
+    def to_dict(self) -> dict:
+        return {"set": self.set_name, "objects": self.objects, "lpips": self.lpips_note or "computed",
+                "rows": [r.to_dict() for r in self.rows]}
+
+
+def _finite_mean(values: list[float]) -> float | None:
+    finite = [v for v in values if v is not None and math.isfinite(v)]
+    return float(np.mean(finite)) if finite else None
+
+
+def _field_mesh_points(field, config: EvalConfig, device) -> np.ndarray:
+    def sdf(points: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            return field.sdf(torch.from_numpy(points).to(device)[None])[0].float().cpu().numpy()
+
+    mesh = extract_mesh(sdf, config.mesh_resolution, field.radius)
+    return surface_samples(mesh.vertices, mesh.faces, config.chamfer_points, seed=0)
+
+
+@torch.no_grad()
+def evaluate_heldout(model: LIRM, objects: list[HeldoutObject], config: EvalConfig = EvalConfig(), set_name: str = "synthetic",
+                     progress: Progress | None = None, cancel: Callable[[], bool] | None = None) -> EvalResult:
+    model.eval()
+    device = next(model.parameters()).device
+    per_update: dict[int, dict[str, list[float]]] = {u: {} for u in range(1, config.updates + 1)}
+    size = model.config.image_size
+    ok, why = lpips_available()
+    lpips_net = LPIPSLoss().to(device) if ok else None
+    for k, obj in enumerate(objects):
+        if progress:
+            progress(f"evaluating {obj.name}", k, len(objects))
+        sets = obj.protocol.input_sets[:config.updates]
+        outputs = obj.protocol.outputs[:config.output_views] if config.output_views else obj.protocol.outputs
+        state = model.initial_state(1)
+        for u, input_set in enumerate(sets, start=1):
+            if cancel is not None and cancel():
+                raise KeyboardInterrupt("evaluation cancelled")
+            chosen = obj.views.select(input_set)
+            inputs = resize_views(chosen, size) if obj.inputs_prepared else crop_like_capture(chosen, size)
+            state = model.update(state, inputs.view_batch(device=device))
+            field_ = model.decode(state)
+            step = 2.0 * field_.radius / config.render.samples_per_ray
+            grid = OccupancyGrid.build(field_, field_.radius, config.render.beta, step, config.occupancy)
+            scores = per_update[u]
+            for i in outputs:
+                out = render_camera(field_, obj.views.cameras[i], config.render, grid, device=device)
+                truth = obj.views
+                coverage = truth.mask[i]
+                inside = coverage > 0.99
+                colour = np.clip(out["colour"], 0.0, 1.0)
+                scores.setdefault("psnr", []).append(psnr(colour, truth.image[i]))
+                scores.setdefault("ssim", []).append(ssim(colour, truth.image[i]))
+                if lpips_net is not None:
+                    as_tensor = lambda a: torch.from_numpy(np.ascontiguousarray(a)).permute(2, 0, 1)[None].to(device)  # noqa: E731
+                    scores.setdefault("lpips", []).append(float(lpips_net(as_tensor(colour), as_tensor(truth.image[i]))))
+                if inside.any() and truth.albedo is not None:
+                    denom = np.maximum(coverage, 1e-6)
+                    scores.setdefault("albedo", []).append(scaled_albedo_psnr(out["albedo"], truth.albedo[i] / denom[..., None], inside))
+                    scores.setdefault("roughness", []).append(psnr(out["roughness"], truth.roughness[i] / denom, inside))
+                    scores.setdefault("metallic", []).append(psnr(out["metallic"], truth.metallic[i] / denom, inside))
+            if obj.surface is not None and len(obj.surface):
+                scores.setdefault("chamfer", []).append(chamfer_distance(_field_mesh_points(field_, config, device), obj.surface))
+    rows = [UpdateScores(u, _finite_mean(s.get("psnr", [])) or float("nan"), _finite_mean(s.get("ssim", [])) or float("nan"),
+                         _finite_mean(s.get("lpips", [])),
+                         _finite_mean(s.get("albedo", [])), _finite_mean(s.get("roughness", [])),
+                         _finite_mean(s.get("metallic", [])), _mean_or_inf(s.get("chamfer")), len(s.get("psnr", [])))
+            for u, s in per_update.items() if s]
+    return EvalResult(set_name, [o.name for o in objects], rows, "" if ok else f"LPIPS skipped: {why}")
+
+
+def _mean_or_inf(values: list[float] | None) -> float | None:
+    if not values:
+        return None
+    return float(np.mean(values))  # inf when some update produced no surface at all: shown as such

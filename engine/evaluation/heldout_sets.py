@@ -1,0 +1,121 @@
+"""The held-out evaluation sets, rendered with the supplementary's test protocol.
+
+- synthetic: built-in procedural objects whose variants come from seeds training never draws
+  (training draws variants below 2^31; these are 2^31 + i), under the built-in environments,
+  randomly rotated; fixed by the set's seed.
+- gltf: the glTF models of a folder (../shared/data/pbr_models) under the HDRIs of another
+  (../shared/data/envmaps), one environment per model in turn.
+
+Each object: 48 protocol cameras (elevations 0/20/40 x 16 azimuths, FoV 50, the bounding sphere
+just fitting), the seeded input sets and output views, ground-truth maps, and points on the true
+surface for the Chamfer distance. Inputs are cut as the capture pipeline cuts photos, the same
+framing the network is trained on.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lirm.engine.assets.asset_source import resolve_asset
+from lirm.engine.assets.environment_files import resolve_environment
+from lirm.engine.orbit_render import normalizing_transform
+from lirm.engine.synth.evaluation_protocol import ProtocolConfig, ProtocolViews, protocol_views
+from lirm.engine.synth.object_views import ObjectViews, render_meshes
+from lirm.engine.synth.procedural_objects import BUILTIN_OBJECTS
+from lirm.engine.synth.training_scenes import auto_exposure_ev
+from lirm.renderer.pbr_renderer import PBRRenderer
+from lirm.renderer.procedural_environments import PROCEDURAL_ENVIRONMENTS
+
+from .chamfer import surface_samples
+
+HELDOUT_VARIANT_BASE = 2**31  # training's object variants are drawn from [0, 2^31 - 1)
+OBJECT_RADIUS = 0.8
+
+
+@dataclass
+class HeldoutObject:
+    name: str
+    protocol: ProtocolViews
+    views: ObjectViews  # all 48 protocol views, full frame
+    surface: np.ndarray | None  # (N, 3) points on the true surface, in the field's frame (None: unknown)
+    inputs_prepared: bool = False  # the views are already the capture's crops (a real capture)
+
+
+def _render_object(renderer: PBRRenderer, name: str, meshes, environment, rotation_deg: float, turn_deg: float,
+                   protocol: ProtocolViews, surface_points: int, seed: int) -> HeldoutObject:
+    bounds_min = np.min([m.positions.min(0) for m in meshes], axis=0)
+    bounds_max = np.max([m.positions.max(0) for m in meshes], axis=0)
+    transform = normalizing_transform(np.stack([bounds_min, bounds_max]))
+    c, s = np.cos(np.radians(turn_deg)), np.sin(np.radians(turn_deg))
+    transform = np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]]) @ transform
+    transform[:3] *= OBJECT_RADIUS
+    lighting = renderer.prepare_lighting(environment, rotation_deg=rotation_deg)
+    try:
+        views = render_meshes(renderer, lighting, meshes, transform, protocol.cameras, supersample=2,
+                              exposure_ev=auto_exposure_ev(environment))
+    finally:
+        lighting.maps.release()
+    vertices, faces, offset = [], [], 0
+    for m in meshes:
+        p = np.c_[m.positions, np.ones(len(m.positions))] @ transform.T
+        vertices.append(p[:, :3])
+        faces.append(m.indices.astype(np.int64) + offset)
+        offset += len(m.positions)
+    surface = surface_samples(np.concatenate(vertices), np.concatenate(faces), surface_points, seed)
+    return HeldoutObject(name, protocol, views, surface)
+
+
+def synthetic_heldout(renderer: PBRRenderer, count: int = 8, size: int = 128, seed: int = 0,
+                      surface_points: int = 20_000) -> list[HeldoutObject]:
+    config = ProtocolConfig(size=size, seed=seed)
+    rng = np.random.default_rng([seed, 2024])
+    environments = list(PROCEDURAL_ENVIRONMENTS)
+    objects = []
+    for i in range(count):
+        name = BUILTIN_OBJECTS[i % len(BUILTIN_OBJECTS)]
+        variant = HELDOUT_VARIANT_BASE + seed * 10_000 + i
+        env_name = environments[i % len(environments)]
+        rotation, turn = float(rng.uniform(0, 360)), float(rng.uniform(0, 360))
+        model = resolve_asset(name, seed=variant)
+        env = resolve_environment(env_name, width=512)
+        objects.append(_render_object(renderer, f"{name}#{i}", model.meshes, env, rotation, turn,
+                                      protocol_views(config, i), surface_points, seed + i))
+    return objects
+
+
+def gltf_heldout(renderer: PBRRenderer, models: list[Path], environments: list[Path], size: int = 128, seed: int = 0,
+                 surface_points: int = 20_000) -> list[HeldoutObject]:
+    config = ProtocolConfig(size=size, seed=seed)
+    rng = np.random.default_rng([seed, 4202])
+    objects = []
+    for i, path in enumerate(models):
+        env = resolve_environment(environments[i % len(environments)])
+        model = resolve_asset(path)
+        rotation = float(rng.uniform(0, 360))
+        objects.append(_render_object(renderer, Path(path).stem, model.meshes, env, rotation, 0.0,
+                                      protocol_views(config, i), surface_points, seed + i))
+    return objects
+
+
+def capture_heldout(capture_dir: Path, views_per_set: int = 4, sets: int = 4) -> list[HeldoutObject]:
+    """A real capture as a one-object set: every 4th prepared view is held out as an output (the
+    photos are the only truth: no materials or surface), the rest are input sets in frame order."""
+    from lirm.engine.capture.capture_folder import Capture
+    from lirm.engine.errors import LirmUserError
+
+    capture = Capture.open(capture_dir)
+    prepared = [v for v in (capture.read_prepared(fid) for fid in sorted(capture.cameras)) if v is not None]
+    if len(prepared) < 2:
+        raise LirmUserError(f"{capture_dir}: {len(prepared)} prepared views; evaluation needs at least 2 "
+                            f"(one input, one held out): add photos with `lirm capture --add`")
+    outputs = list(range(3, len(prepared), 4)) or [len(prepared) - 1]
+    inputs = [i for i in range(len(prepared)) if i not in outputs]
+    input_sets = [inputs[k:k + views_per_set] for k in range(0, len(inputs), views_per_set)][:sets]
+    protocol = ProtocolViews([v.camera for v in prepared], [], [], input_sets, outputs)
+    views = ObjectViews([v.camera for v in prepared], np.stack([v.image_masked for v in prepared]),
+                        np.stack([v.image_bg for v in prepared]), np.stack([v.mask for v in prepared]),
+                        None, None, None, None)
+    return [HeldoutObject(Path(capture_dir).name, protocol, views, None, inputs_prepared=True)]

@@ -1,0 +1,66 @@
+"""Training checkpoints: the model's weights plus everything needed to continue the same run
+exactly — the AdamW moments, the stage, the step and the run's settings (the data of every step is
+derived from the data seed and the step, training_sample.py, so no RNG state needs saving).
+
+They are ordinary LIRM checkpoints (engine/model/checkpoint.py) with the optimizer state under the
+`training.` prefix, so `lirm reconstruct --checkpoint` and `lirm eval` read them directly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from lirm.engine.errors import LirmUserError
+from lirm.engine.model.checkpoint import load_checkpoint, load_training_tensors, peek_checkpoint, save_checkpoint
+from lirm.engine.model.lirm import LIRM
+
+_MOMENTS = ("exp_avg", "exp_avg_sq", "step")
+
+
+@dataclass
+class ResumePoint:
+    model: LIRM
+    stage: int
+    step: int  # iterations done in that stage
+    run: dict  # the run's settings as saved
+    optimizer_state: dict[str, torch.Tensor]  # "param_name/moment" -> tensor (empty for model-only checkpoints)
+
+
+def save_training_checkpoint(path: Path, model: LIRM, optimizer: torch.optim.Optimizer, stage: int, step: int,
+                             run: dict) -> Path:
+    names = {id(p): n for n, p in model.named_parameters()}
+    tensors = {}
+    for group in optimizer.param_groups:
+        for p in group["params"]:
+            for key, value in optimizer.state.get(p, {}).items():
+                if key in _MOMENTS and torch.is_tensor(value):
+                    tensors[f"{names[id(p)]}/{key}"] = value
+    metadata = {"training": {"stage": stage, "step": step, "run": run}, "trained": True}
+    return save_checkpoint(model, path, metadata=metadata, training_tensors=tensors)
+
+
+def load_resume_point(path: str | Path, preset: str) -> ResumePoint:
+    """Everything in a checkpoint to continue from; errors name the file and what to pass instead."""
+    config, extra = peek_checkpoint(path)
+    model, _ = load_checkpoint(path, expected=preset)
+    training = extra.get("training")
+    if not isinstance(training, dict) or not {"stage", "step"} <= set(training):
+        # A model-only checkpoint (e.g. the shipped one) can still start a stage from its weights.
+        return ResumePoint(model, 0, 0, {}, {})
+    return ResumePoint(model, int(training["stage"]), int(training["step"]), dict(training.get("run") or {}),
+                       load_training_tensors(path))
+
+
+def restore_optimizer(optimizer: torch.optim.Optimizer, model: LIRM, state: dict[str, torch.Tensor], path: str | Path) -> None:
+    params = dict(model.named_parameters())
+    missing = [n for n in params if f"{n}/exp_avg" not in state]
+    if missing:
+        raise LirmUserError(f"checkpoint {path} has no optimizer state for {len(missing)} parameters (e.g. {missing[0]}); "
+                            f"it is damaged or was not saved by lirm train; resume from another checkpoint of the run")
+    for n, p in params.items():
+        # AdamW keeps its step count on the CPU (unless capturable); the moments live with the parameter.
+        optimizer.state[p] = {k: state[f"{n}/{k}"] if k == "step" else state[f"{n}/{k}"].to(p.device)
+                              for k in _MOMENTS if f"{n}/{k}" in state}
