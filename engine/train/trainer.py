@@ -204,7 +204,7 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
     cuda = device.type == "cuda"
     model.transformer.gradient_checkpointing = cuda  # memory for batch on GPUs; a CPU run is small anyway
     optimizer = torch.optim.AdamW(model.parameters(), lr=stage.learning_rate[0], betas=(0.9, 0.95), weight_decay=0.05)  # decay as MeshLRM; the paper gives only the betas
-    if optimizer_state:
+    if start_step > 0:  # continuing: the moments must be there (restore_optimizer says so if not)
         restore_optimizer(optimizer, model, optimizer_state, config.resume)
     weights = replace(config.losses, numerical_normal=stage.numerical_normal_weight)
     objective = TrainingObjective(model, weights, perceptual_loss(config.lpips)).to(device)

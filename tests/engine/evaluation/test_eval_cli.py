@@ -1,0 +1,74 @@
+"""lirm eval: the paper's table after updates 1-4, on the synthetic held-out set and on a capture."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+import torch
+
+from lirm.engine.evaluation.evaluate import EvalConfig, evaluate_heldout
+from lirm.engine.evaluation.heldout_sets import synthetic_heldout
+from lirm.engine.model.checkpoint import save_checkpoint
+from lirm.engine.model.config import preset
+from lirm.engine.model.lirm import LIRM
+from lirm.engine.model.volume_renderer import VolumeRenderConfig
+
+
+@pytest.fixture(scope="module")
+def tiny_checkpoint(tmp_path_factory):
+    torch.manual_seed(0)
+    path = tmp_path_factory.mktemp("ckpt") / "tiny.safetensors"
+    save_checkpoint(LIRM(preset("tiny")), path)
+    return path
+
+
+def test_heldout_set_is_fixed_and_disjoint_from_inputs(renderer):
+    a = synthetic_heldout(renderer, 2, 32, surface_points=100)
+    b = synthetic_heldout(renderer, 2, 32, surface_points=100)
+    assert [o.name for o in a] == ["vase#0", "mug#1"]
+    assert (a[0].views.image == b[0].views.image).all()
+    for obj in a:
+        assert len(obj.views.cameras) == 48 and len(obj.protocol.input_sets) == 4
+        used = {i for s in obj.protocol.input_sets for i in s}
+        assert not used & set(obj.protocol.outputs) and len(obj.protocol.outputs) == 12
+        assert obj.surface.shape == (100, 3) and abs(obj.surface).max() <= 0.8 + 1e-4
+
+
+def test_eval_scores_every_update(renderer):
+    objects = synthetic_heldout(renderer, 1, 32, surface_points=500)
+    config = EvalConfig(render=VolumeRenderConfig(samples_per_ray=32, numerical_normals=False), mesh_resolution=24,
+                        chamfer_points=500, output_views=2)
+    model = LIRM(preset("tiny"))
+    result = evaluate_heldout(model, objects, config)
+    assert [r.update for r in result.rows] == [1, 2, 3, 4]
+    for row in result.rows:
+        assert 0 < row.psnr < 60 and -1 <= row.ssim <= 1 and row.views == 2
+        assert row.albedo_psnr is not None and row.roughness_psnr is not None and row.chamfer is not None
+
+
+@pytest.mark.slow
+def test_lirm_eval_writes_the_markdown_table(tmp_path, tiny_checkpoint):
+    out = tmp_path / "table.md"
+    cmd = [sys.executable, "-m", "lirm.engine.cli", "eval", str(tiny_checkpoint), "--objects", "1", "--size", "32",
+           "--output-views", "2", "--mesh-resolution", "24", "-o", str(out)]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    table = out.read_text()
+    assert table in done.stdout
+    assert "| after update | PSNR ↑ | SSIM ↑ | LPIPS ↓ | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ | CD ↓ |" in table
+    for update in range(1, 5):
+        assert f"\n| {update} | " in table
+    numbers = json.loads(out.with_suffix(".json").read_text())
+    assert [r["update"] for r in numbers["rows"]] == [1, 2, 3, 4]
+
+
+def test_lirm_eval_refuses_a_bad_set_and_a_missing_checkpoint(tmp_path, tiny_checkpoint):
+    done = subprocess.run([sys.executable, "-m", "lirm.engine.cli", "eval", str(tiny_checkpoint), "--set", str(tmp_path)],
+                          capture_output=True, text=True)
+    assert done.returncode == 2 and "not 'synthetic', 'gltf' or a capture folder" in done.stderr
+    done = subprocess.run([sys.executable, "-m", "lirm.engine.cli", "eval", str(tmp_path / "none.safetensors")],
+                          capture_output=True, text=True)
+    assert done.returncode == 2 and "does not exist" in done.stderr

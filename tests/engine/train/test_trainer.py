@@ -1,0 +1,134 @@
+"""lirm train on the CPU: the loss falls, a resume continues the exact curve, two gloo processes
+train together, and bad input stops before compute is spent."""
+
+from __future__ import annotations
+
+import csv
+import os
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from safetensors.torch import load_file, save_file
+
+from lirm.engine.errors import LirmUserError
+from lirm.engine.model.checkpoint import load_checkpoint, peek_checkpoint
+from lirm.engine.synth.training_scenes import TrainingSceneConfig
+from lirm.engine.train.trainer import TrainConfig, run_training
+
+# Small scenes rendered once per test session into a shared cache: 16 views (2 sets of up to 6 inputs
+# and the targets fit), rendered at the tiny model's 64 px input size.
+SCENES = TrainingSceneConfig(views=16, size=64, environment_width=128)
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("scene_cache")
+
+
+def _config(out: Path, cache: Path, **kw) -> TrainConfig:
+    base = dict(preset="tiny", stage=1, out_dir=str(out), stage_steps=40, scene_pool=1, cache_dir=str(cache),
+                scenes=SCENES, checkpoint_every=1000)
+    base.update(kw)
+    return TrainConfig(**base)
+
+
+def _csv(path: Path) -> list[dict]:
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.mark.slow
+def test_tiny_training_loss_falls(tmp_path, cache):
+    result = run_training(_config(tmp_path / "run", cache, max_steps=40))
+    losses = np.array([r["loss"] for r in result.history])
+    assert len(losses) == 40 and np.all(np.isfinite(losses))
+    assert losses[-10:].mean() < 0.95 * losses[:10].mean(), losses
+    rows = _csv(tmp_path / "run" / "metrics.csv")
+    assert [int(r["step"]) for r in rows] == list(range(1, 41))
+    assert {"loss", "colour", "albedo", "roughness", "metallic", "normal", "perceptual", "loss_update1", "loss_update2"} <= set(rows[0])
+    assert float(rows[-1]["lr"]) == pytest.approx(1e-4, rel=0.05)  # the cosine reached the stage's end
+    assert float(rows[-1]["inv_beta"]) == pytest.approx(200.0)
+    assert any((tmp_path / "run" / "tensorboard").iterdir())
+    # The final checkpoint is an ordinary model checkpoint too.
+    model, extra = load_checkpoint(tmp_path / "run" / "last.safetensors")
+    assert model.config.name == "tiny" and extra["training"]["step"] == 40
+
+
+def test_resume_continues_the_exact_loss_curve(tmp_path, cache):
+    straight = run_training(_config(tmp_path / "straight", cache, max_steps=6))
+    first = run_training(_config(tmp_path / "split", cache, max_steps=3, checkpoint_every=3))
+    assert first.checkpoint.name == "stage1_step0000003.safetensors"
+    resumed = run_training(_config(tmp_path / "split", cache, max_steps=6, resume=str(first.checkpoint)))
+    assert resumed.first_step == 3
+    a = [r["loss"] for r in straight.history]
+    b = [r["loss"] for r in first.history + resumed.history]
+    np.testing.assert_allclose(b, a, rtol=1e-5)
+    assert [int(r["step"]) for r in _csv(tmp_path / "split" / "metrics.csv")] == [1, 2, 3, 4, 5, 6]
+
+
+def test_a_later_stage_starts_from_the_earlier_stages_weights(tmp_path, cache):
+    first = run_training(_config(tmp_path / "s1", cache, max_steps=1, checkpoint_every=1))
+    second = run_training(_config(tmp_path / "s2", cache, stage=3, max_steps=1, resume=str(first.checkpoint)))
+    assert second.first_step == 0 and second.last_step == 1
+    record = second.history[0]
+    assert "numerical_normal" in record and record["loss_update3"] > 0  # stage 3: three updates, SDF normals
+    _, extra = peek_checkpoint(tmp_path / "s2" / "last.safetensors")
+    assert extra["training"]["stage"] == 3
+
+
+def test_corrupt_or_wrong_resume_checkpoints_stop_before_training(tmp_path, cache):
+    first = run_training(_config(tmp_path / "ok", cache, max_steps=1, checkpoint_every=1))
+    truncated = tmp_path / "truncated.safetensors"
+    truncated.write_bytes(first.checkpoint.read_bytes()[:5000])
+    with pytest.raises(LirmUserError, match="truncated"):
+        run_training(_config(tmp_path / "bad", cache, max_steps=2, resume=str(truncated)))
+    # Optimizer state removed: it cannot continue the run exactly, and says so.
+    tensors = load_file(first.checkpoint)
+    header = __import__("safetensors").safe_open(str(first.checkpoint), "pt").metadata()
+    stripped = tmp_path / "stripped.safetensors"
+    save_file({k: v for k, v in tensors.items() if not k.startswith("training.")}, str(stripped), metadata=header)
+    with pytest.raises(LirmUserError, match="no optimizer state"):
+        run_training(_config(tmp_path / "bad", cache, max_steps=2, resume=str(stripped)))
+    with pytest.raises(LirmUserError, match="'tiny' model but the 'small'"):
+        run_training(_config(tmp_path / "bad", cache, preset="small", max_steps=2, resume=str(first.checkpoint)))
+    assert not (tmp_path / "bad" / "metrics.csv").exists()
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.slow
+def test_two_gloo_processes_train_together(tmp_path, cache):
+    out = tmp_path / "ddp"
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc-per-node", "2", "--master-port", str(_free_port()),
+           "-m", "lirm.engine.cli", "train", "--preset", "tiny", "--max-steps", "3", "--stage-steps", "40",
+           "--scene-pool", "2", "--cache", str(cache), "--out", str(out), "--checkpoint-every", "3", "--device", "cpu"]
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
+    assert done.returncode == 0, done.stderr[-3000:]
+    rows = _csv(out / "metrics.csv")
+    assert [int(r["step"]) for r in rows] == [1, 2, 3]  # one writer: process 0
+    _, extra = peek_checkpoint(out / "last.safetensors")
+    assert extra["training"]["run"]["world_size"] == 2
+
+
+def test_cli_train_reports_broken_environment_files_and_goes_on(tmp_path, shared_data, cache):
+    envs = tmp_path / "envs"
+    envs.mkdir()
+    (envs / "good.hdr").write_bytes((shared_data / "envmaps" / "studio_small_03_1k.hdr").read_bytes())
+    (envs / "broken.hdr").write_bytes(b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 4")
+    cmd = [sys.executable, "-m", "lirm.engine.cli", "train", "--max-steps", "1", "--stage-steps", "40", "--scene-pool", "1",
+           "--cache", str(cache), "--out", str(tmp_path / "run"), "--environments", str(envs)]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "1 usable environments, 1 skipped" in done.stderr and "skipped broken.hdr" in done.stderr
+    (envs / "good.hdr").unlink()
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 2 and "no usable HDR environments" in done.stderr
