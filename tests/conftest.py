@@ -69,3 +69,22 @@ def x_display():
         os.environ.pop("DISPLAY", None)
         proc.terminate()
         proc.wait(timeout=10)
+
+
+@pytest.fixture(scope="session")
+def lego_capture(tmp_path_factory, shared_data) -> Path:
+    """A prepared capture of 8 lego renders with known poses and alpha masks (no COLMAP), 64 px crops.
+    Tests that change it copy it first."""
+    import shutil
+
+    from lirm.engine.cli import main
+
+    lego = shared_data / "synth_nerf_lego_train"
+    root = tmp_path_factory.mktemp("rec")
+    folder = root / "photos"
+    folder.mkdir()
+    for i in range(0, 40, 5):
+        shutil.copy(lego / "train" / f"r_{i}.png", folder / f"r_{i}.png")
+    assert main(["capture", str(folder), "-o", str(root / "capture"), "--masks", "alpha", "--size", "64",
+                 "--poses", str(lego / "transforms_train.json"), "--reference-originals"]) == 0
+    return root / "capture"

@@ -1,6 +1,7 @@
 """`lirm bench synth`: how fast the synthetic world renders training views on this machine, and a
 contact sheet of what it makes (rows: scenes; per view the image, background image, albedo,
-roughness, metallic and normal) to look at."""
+roughness, metallic and normal) to look at. With `capture_crops` (the default) the views are cut as
+training cuts them (synth/view_crops.py), and the cut is part of the timing."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import numpy as np
 
 from lirm.engine.io.images import to_uint8, write_png
 from lirm.engine.synth.training_scenes import TrainingScene, TrainingSceneConfig, make_training_scene
+from lirm.engine.synth.view_crops import crop_like_capture
 
 
 @dataclass(frozen=True)
@@ -21,6 +23,7 @@ class SynthBenchConfig:
     first_seed: int = 0
     sheet_views: int = 4  # views per scene on the contact sheet
     sheet_path: Path | None = None
+    capture_crops: bool = True  # cut each view around the object like the capture pipeline (what training sees)
 
 
 @dataclass
@@ -51,7 +54,10 @@ def run_synth_bench(config: SynthBenchConfig, progress=None) -> SynthBenchResult
         make_training_scene(renderer, config.first_seed, replace(config.scene, views=1))  # compile shaders, bake the BRDF table
         start = time.perf_counter()
         for k in range(config.scenes):
-            scenes.append(make_training_scene(renderer, config.first_seed + k, config.scene))
+            scene = make_training_scene(renderer, config.first_seed + k, config.scene)
+            if config.capture_crops:
+                scene.views = crop_like_capture(scene.views, config.scene.size)
+            scenes.append(scene)
             if progress:
                 progress(f"scene {k + 1}/{config.scenes}: {scenes[-1].description.object_name} under {scenes[-1].description.environment}")
         seconds = time.perf_counter() - start

@@ -53,7 +53,9 @@ class SceneSource:
                 return _load_views(cached)
             except Exception as err:  # a damaged cache entry is re-rendered, not fatal
                 log.warning("scene cache entry %s is unreadable (%s); rendering it again", cached, err)
-        views = crop_like_capture(self._render(seed), self.input_size)
+        # Stored at the cache's precision whether cached or not: a step must see the same data in a
+        # run that rendered its scene and in a resumed run that reads it back.
+        views = _at_cache_precision(crop_like_capture(self._render(seed), self.input_size))
         if cached is not None:
             atomic_write(cached, lambda tmp: _save_views(tmp, views))
         return views
@@ -88,6 +90,12 @@ class SceneSource:
         state = dict(self.__dict__)
         state["_renderer"] = state["_context"] = None
         return state
+
+
+def _at_cache_precision(views: ObjectViews) -> ObjectViews:
+    maps = {name: None if getattr(views, name) is None else getattr(views, name).astype(np.float16).astype(np.float32)
+            for name in _MAPS}
+    return ObjectViews(views.cameras, **maps)
 
 
 def _save_views(path: Path, views: ObjectViews) -> None:

@@ -72,3 +72,27 @@ def test_lirm_eval_refuses_a_bad_set_and_a_missing_checkpoint(tmp_path, tiny_che
     done = subprocess.run([sys.executable, "-m", "lirm.engine.cli", "eval", str(tmp_path / "none.safetensors")],
                           capture_output=True, text=True)
     assert done.returncode == 2 and "does not exist" in done.stderr
+
+
+def test_gltf_heldout_set_renders_the_models_under_the_hdris(renderer, shared_data):
+    from lirm.engine.evaluation.heldout_sets import gltf_heldout
+
+    models = [shared_data / "pbr_models" / "Avocado_tex256.glb", shared_data / "pbr_models" / "WaterBottle_tex256.glb"]
+    envs = [shared_data / "envmaps" / "studio_small_03_1k.hdr"]
+    objects = gltf_heldout(renderer, models, envs, size=24, surface_points=200)
+    assert [o.name for o in objects] == ["Avocado_tex256", "WaterBottle_tex256"]
+    for obj in objects:
+        assert obj.views.mask.mean() > 0.05 and obj.views.albedo.max() > 0
+        assert abs(obj.surface).max() <= 0.8 + 1e-4
+
+
+def test_eval_on_a_real_capture_holds_out_every_fourth_view(lego_capture):
+    from lirm.engine.evaluation.heldout_sets import capture_heldout
+
+    (obj,) = capture_heldout(lego_capture)
+    assert obj.protocol.outputs == [3, 7] and obj.protocol.input_sets == [[0, 1, 2, 4], [5, 6]]
+    assert obj.surface is None and obj.views.albedo is None
+    config = EvalConfig(render=VolumeRenderConfig(samples_per_ray=24, numerical_normals=False), mesh_resolution=16)
+    result = evaluate_heldout(LIRM(preset("tiny")), [obj], config, set_name="capture")
+    assert [r.update for r in result.rows] == [1, 2]
+    assert all(r.albedo_psnr is None and r.chamfer is None and r.views == 2 for r in result.rows)

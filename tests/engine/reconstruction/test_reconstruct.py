@@ -23,19 +23,6 @@ from lirm.engine.reconstruction.session import update_sets
 FAST = ["--preset", "tiny", "--novel-views", "1", "--render-size", "24", "--grid-resolution", "48"]
 
 
-@pytest.fixture(scope="module")
-def lego_capture(tmp_path_factory, shared_data) -> Path:
-    lego = shared_data / "synth_nerf_lego_train"
-    root = tmp_path_factory.mktemp("rec")
-    folder = root / "photos"
-    folder.mkdir()
-    for i in range(0, 40, 5):
-        shutil.copy(lego / "train" / f"r_{i}.png", folder / f"r_{i}.png")
-    assert main(["capture", str(folder), "-o", str(root / "capture"), "--masks", "alpha", "--size", "64",
-                 "--poses", str(lego / "transforms_train.json"), "--reference-originals"]) == 0
-    return root / "capture"
-
-
 def test_update_sets_split_in_frame_order():
     assert update_sets(list("abcdefghij"), 4, None) == [list("abcd"), list("efgh"), list("ij")]
     assert update_sets(list("abcdefghij"), 4, 2) == [list("abcd"), list("efgh")]
