@@ -308,6 +308,11 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
             signal.signal(signal.SIGINT, previous_handler)
         if writer is not None:
             writer.close()
+        if info.is_main and (out_dir / "metrics.csv").is_file():
+            from .loss_curve import write_loss_curves
+
+            write_loss_curves(out_dir / "metrics.csv", out_dir / "loss_curves.png",
+                              title=f"{config.preset} stage {config.stage}: loss terms per step (log scale)")
         source.release()
     return TrainResult(out_dir, config.stage, start_step, history[-1]["step"] if history else start_step, history,
                        stopped_early, checkpoint)

@@ -53,6 +53,7 @@ def test_tiny_training_loss_falls(tmp_path, cache):
     assert float(rows[-1]["lr"]) == pytest.approx(1e-4, rel=0.05)  # the cosine reached the stage's end
     assert float(rows[-1]["inv_beta"]) == pytest.approx(200.0)
     assert any((tmp_path / "run" / "tensorboard").iterdir())
+    assert (tmp_path / "run" / "loss_curves.png").is_file()
     # The final checkpoint is an ordinary model checkpoint too.
     model, extra = load_checkpoint(tmp_path / "run" / "last.safetensors")
     assert model.config.name == "tiny" and extra["training"]["step"] == 40
