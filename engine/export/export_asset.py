@@ -1,0 +1,93 @@
+"""Field -> .glb: extract and clean the mesh, unwrap it, bake the materials, write the file.
+
+`export_field` is what `lirm export` and the app call; every stage reports progress and is timed.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from lirm.engine.errors import LirmUserError
+
+from .field_mesh import MeshExtractionConfig, extract_field_mesh
+from .glb_writer import TexturedMesh, write_glb
+from .texture_bake import BakeConfig, BakedTextures, bake_textures
+from .uv_atlas import AtlasConfig, UVMesh, unwrap
+
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass(frozen=True)
+class ExportConfig:
+    mesh: MeshExtractionConfig = field(default_factory=MeshExtractionConfig)
+    texture_size: int = 1024
+    atlas_padding: int = 4
+    bake: BakeConfig = field(default_factory=BakeConfig)
+    normal_map: bool = True
+
+    def __post_init__(self) -> None:
+        if not 64 <= self.texture_size <= 4096:
+            raise LirmUserError(f"texture size {self.texture_size} is outside 64..4096 (512-2048 is typical)")
+
+
+@dataclass
+class ExportResult:
+    path: Path
+    faces: int
+    vertices: int
+    texture_size: int
+    seconds: dict[str, float]
+    uv_mesh: UVMesh
+    textures: BakedTextures
+
+
+def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig(), world_transform: np.ndarray | None = None,
+                 progress: Progress | None = None, context=None) -> ExportResult:
+    """`context`: a moderngl context to rasterise with (a headless one is made when None)."""
+    path = Path(path)
+    if path.suffix.lower() != ".glb":
+        raise LirmUserError(f"{path}: the output must be a .glb file")
+    if not path.parent.exists():
+        raise LirmUserError(f"cannot write {path}: the folder {path.parent} does not exist")
+    seconds: dict[str, float] = {}
+    steps = 5
+
+    def stage(name: str, k: int) -> float:
+        if progress:
+            progress(name, k, steps)
+        return time.perf_counter()
+
+    t = stage("extracting the surface", 0)
+    mesh = extract_field_mesh(field_, config.mesh)
+    seconds["mesh"] = time.perf_counter() - t
+    t = stage(f"unwrapping {len(mesh.faces)} faces", 1)
+    uv_mesh = unwrap(mesh, AtlasConfig(config.texture_size, config.atlas_padding))
+    seconds["unwrap"] = time.perf_counter() - t
+    t = stage(f"baking {config.texture_size}px textures", 2)
+    from lirm.renderer.context import create_headless_context
+    from lirm.renderer.uv_raster import UVRasterizer
+
+    ctx = context or create_headless_context()
+    rasterizer = UVRasterizer(ctx)
+    try:
+        raster = rasterizer.rasterize(uv_mesh.positions, uv_mesh.normals, uv_mesh.tangents, uv_mesh.uvs, uv_mesh.faces,
+                                      config.texture_size)
+    finally:
+        rasterizer.release()
+        if context is None:
+            ctx.release()
+    textures = bake_textures(field_, raster, config.bake)
+    seconds["bake"] = time.perf_counter() - t
+    t = stage(f"writing {path.name}", 3)
+    textured = TexturedMesh(uv_mesh.positions, uv_mesh.normals, uv_mesh.tangents, uv_mesh.uvs, uv_mesh.faces,
+                            textures.base_color_srgb8(), textures.metallic_roughness8(),
+                            textures.normal8() if config.normal_map else None)
+    write_glb(path, textured, world_transform)
+    seconds["write"] = time.perf_counter() - t
+    stage("done", 5)
+    return ExportResult(path, len(uv_mesh.faces), len(uv_mesh.positions), config.texture_size, seconds, uv_mesh, textures)
