@@ -9,6 +9,7 @@ BIN := $(VENV)/bin
 DEMO_DIR ?= demo_output
 SHARED_DATA ?= ../shared/data
 DEBIAN_PACKAGES := libegl1 libegl-mesa0 libgl1 libglx-mesa0 libgl1-mesa-dri xvfb xauth xdotool imagemagick
+GLTF_VALIDATOR := gltf-validator@2.0.0-dev.3.10
 
 .PHONY: demo test setup system-packages bench-render bench-capture clean
 
@@ -18,12 +19,13 @@ demo: setup
 test: setup
 	$(BIN)/python -m pytest
 
-setup: system-packages $(VENV)/.installed
+setup: system-packages $(VENV)/.installed .node/node_modules/gltf-validator
 
 # Installs only what is missing; needs root (apt-get) the first time.
 system-packages:
 	@missing=""; for p in $(DEBIAN_PACKAGES); do dpkg-query -W -f='$${Status}' $$p 2>/dev/null | grep -q "ok installed" || missing="$$missing $$p"; done; \
 	$(PYTHON) -c "import ensurepip" 2>/dev/null || missing="$$missing python3-venv"; \
+	command -v npm >/dev/null 2>&1 || missing="$$missing nodejs npm"; \
 	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = "0" ]; then \
 	    echo "installing Debian packages:$$missing"; \
@@ -40,6 +42,10 @@ $(VENV)/.installed: pyproject.toml
 	$(BIN)/python -m pip install -q -e '.[dev]'
 	touch $@
 
+# The Khronos glTF validator (npm) that the export tests run on every exported file.
+.node/node_modules/gltf-validator:
+	npm install --prefix .node $(GLTF_VALIDATOR) --no-audit --no-fund --silent
+
 # Capture pipeline figures: 20 and 60 fox photos at long side 960, in fresh processes.
 bench-capture: setup
 	$(BIN)/lirm bench capture $(SHARED_DATA)/real_instantngp_fox/images --counts 20,60 --max-side 960
@@ -50,4 +56,4 @@ bench-render: setup
 	  --env $(SHARED_DATA)/envmaps/studio_small_03_1k.hdr --sizes 512,1024 --frames 20
 
 clean:
-	rm -rf $(VENV) $(DEMO_DIR) build *.egg-info
+	rm -rf $(VENV) .node $(DEMO_DIR) build *.egg-info

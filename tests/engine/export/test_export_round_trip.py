@@ -8,14 +8,13 @@ import struct
 
 import numpy as np
 import pytest
+import torch
 
 from lirm.engine.assets.model_loader import load_model
 from lirm.engine.errors import LirmUserError
 from lirm.engine.export.export_asset import ExportConfig, export_field
 from lirm.engine.export.field_mesh import MeshExtractionConfig
 from lirm.engine.metrics import psnr
-import torch
-
 from lirm.engine.model.analytic_fields import BoxField, MaterialPattern, SphereField
 from lirm.engine.model.volume_renderer import VolumeRenderConfig, render_camera
 from lirm.engine.synth.object_views import protocol_cameras
@@ -99,3 +98,11 @@ def test_bad_output_paths_are_refused_and_existing_files_kept(tmp_path, gl_conte
     finally:
         read_only.chmod(0o700)
     assert existing.read_bytes() == b"previous asset"
+
+
+def test_exported_file_passes_the_khronos_validator(exported):
+    from lirm.engine.export.gltf_validation import validate_gltf
+
+    report = validate_gltf(exported.path)
+    assert report.errors == 0, report.messages
+    assert report.warnings == 0, report.messages
