@@ -82,6 +82,16 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument("--grid-resolution", type=int, default=128, help="occupancy grid voxels per side for those renders (default 128; the paper uses 250)")
     rec.set_defaults(run=_run_reconstruct)
 
+    ex = sub.add_parser("export", help="the capture's latest reconstruction as a textured PBR .glb")
+    ex.add_argument("capture", type=Path, help="a capture folder with a reconstruction (`lirm reconstruct`)")
+    ex.add_argument("-o", "--out", type=Path, required=True, help="the .glb to write (replaced only by a complete file)")
+    ex.add_argument("--faces", type=int, default=20_000, help="face budget after decimation (default 20000)")
+    ex.add_argument("--texture", type=int, default=1024, help="texture side in pixels, 64..4096 (default 1024)")
+    ex.add_argument("--grid", type=int, default=256, help="marching-cubes grid per side (default 256)")
+    ex.add_argument("--checkpoint", type=Path, help="the weights the reconstruction was made with (default: as lirm reconstruct)")
+    ex.add_argument("--no-normal-map", action="store_true", help="leave out the tangent-space normal map")
+    ex.set_defaults(run=_run_export)
+
     tr = sub.add_parser("train", help="train LIRM on synthetic scenes: one stage of the coarse-to-fine schedule (torchrun for many GPUs)")
     tr.add_argument("--preset", default="tiny", choices=["tiny", "small", "paper"], help="model and schedule size (default tiny)")
     tr.add_argument("--stage", type=int, default=1, choices=[1, 2, 3], help="stage of the supplementary's schedule (default 1)")
@@ -322,6 +332,28 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
     print(f"summary: {result.out_dir / 'summary.json'}")
     if source.warning:
         print(source.warning, file=sys.stderr)
+    return 0
+
+
+def _run_export(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from .export.capture_export import export_capture
+    from .export.export_asset import ExportConfig
+    from .export.field_mesh import MeshExtractionConfig
+
+    if args.faces < 100:
+        raise LirmUserError("--faces must be at least 100")
+    if args.grid < 16:
+        raise LirmUserError("--grid must be at least 16")
+    config = ExportConfig(mesh=replace(MeshExtractionConfig(), resolution=args.grid, face_budget=args.faces),
+                          texture_size=args.texture, normal_map=not args.no_normal_map)
+    result, source = export_capture(args.capture, args.out, config, args.checkpoint,
+                                    progress=lambda stage, done, total: print(f"[{done}/{total}] {stage}", file=sys.stderr))
+    if not source.trained:
+        print(f"WARNING: exported from UNTRAINED weights ({source.description}): the asset does not look like the object", file=sys.stderr)
+    timings = ", ".join(f"{k} {v:.1f} s" for k, v in result.seconds.items())
+    print(f"{result.path}: {result.faces} faces, {result.vertices} vertices, {result.texture_size}px textures ({timings})")
     return 0
 
 

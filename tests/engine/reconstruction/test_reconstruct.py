@@ -77,3 +77,19 @@ def test_state_files_round_trip_and_refuse_garbage(tmp_path):
     with pytest.raises(LirmUserError, match="junk.safetensors"):
         load_state(tmp_path / "junk.safetensors")
     assert np.isfinite(back.plane_tokens.numpy()).all()
+
+
+def test_export_writes_a_valid_glb_of_the_latest_update(lego_capture, tmp_path, capsys):
+    from lirm.engine.export.gltf_validation import validate_gltf
+
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    assert main(["export", str(capture), "-o", str(tmp_path / "a.glb")]) == 2
+    assert "no reconstruction yet" in capsys.readouterr().err
+    assert main(["reconstruct", str(capture), "--updates", "1"] + FAST) == 0
+    out = tmp_path / "asset.glb"
+    assert main(["export", str(capture), "-o", str(out), "--faces", "2000", "--texture", "256", "--grid", "64"]) == 0
+    captured = capsys.readouterr()
+    assert "UNTRAINED" in captured.err and "faces" in captured.out
+    report = validate_gltf(out)
+    assert report.errors == 0, report.messages

@@ -1,0 +1,52 @@
+"""`lirm export CAPTURE`: the capture's latest reconstruction state, decoded by the model that made
+it, exported as a .glb at the capture's real-world scale.
+
+The normalised capture frame is +Z up with the object inside the unit sphere; the export divides
+by the normalisation's scale (back to the photos' units: metres when the poses were metric) and,
+when a support plane was found, stands the object on it at height 0 (glTF's ground), centred.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from lirm.engine.capture.capture_folder import Capture
+from lirm.engine.errors import LirmUserError
+from lirm.engine.model.pretrained import ModelSource, load_model
+from lirm.engine.model.state_file import load_state
+
+from .export_asset import ExportConfig, ExportResult, Progress, export_field
+
+
+def latest_state_path(capture: Capture) -> Path:
+    if not capture.updates:
+        raise LirmUserError(f"{capture.root} has no reconstruction yet: run `lirm reconstruct {capture.root}` first")
+    return capture.root / capture.updates[-1]["state"]
+
+
+def export_transform(capture: Capture) -> np.ndarray:
+    """From the normalised frame to the exported one: real-world scale, standing on the support plane."""
+    m = np.eye(4)
+    if capture.normalization is None:
+        return m
+    scale = capture.normalization.scale
+    m[:3, :3] /= scale
+    plane = capture.normalization.plane
+    if plane is not None and abs(float(plane[0][2])) > 0.9:  # a floor under the object (n ~ +Z)
+        m[2, 3] = -float(plane[1]) / float(plane[0][2]) / scale
+    return m
+
+
+def export_capture(capture_dir: str | Path, out_path: str | Path, config: ExportConfig = ExportConfig(),
+                   checkpoint: str | Path | None = None, progress: Progress | None = None) -> tuple[ExportResult, ModelSource]:
+    capture = Capture.open(capture_dir)
+    state_path = latest_state_path(capture)
+    summary_path = capture.root / "reconstruction" / "summary.json"
+    preset = json.loads(summary_path.read_text())["preset"] if summary_path.is_file() else "small"
+    source = load_model(checkpoint, preset)
+    state = load_state(state_path)
+    field = source.model.decode(state)  # a state of another architecture is refused here, by name
+    return export_field(field, out_path, config, export_transform(capture), progress), source
