@@ -143,6 +143,13 @@ def build_parser() -> argparse.ArgumentParser:
     bk.add_argument("--steps", type=int, default=1500, help="training steps (default 1500)")
     bk.add_argument("--json", type=Path, help="also write the figures and the loss history to this JSON file")
     bk.set_defaults(run=_run_bench_capacity)
+    bx = bench_sub.add_parser("export", help="export speed: marching cubes, decimation, unwrap, bake and write of a 20k-face asset")
+    bx.add_argument("--grid", type=int, default=256, help="marching-cubes grid (default 256)")
+    bx.add_argument("--faces", type=int, default=20_000, help="face budget (default 20000)")
+    bx.add_argument("--texture", type=int, default=1024, help="texture side (default 1024)")
+    bx.add_argument("--json", type=Path, help="also write the figures here")
+    bx.set_defaults(run=_run_bench_export)
+
     bs = bench_sub.add_parser("synth", help="synthetic training views per second, and a contact sheet of them")
     bs.add_argument("--scenes", type=int, default=4, help="scenes to generate (default 4)")
     bs.add_argument("--views", type=int, default=8, help="views per scene (default 8; training uses 32)")
@@ -552,6 +559,20 @@ def _run_bench_capacity(args: argparse.Namespace) -> int:
         atomic_write_json(args.json, result.to_dict())
         sheet = write_png(args.json.with_suffix(".png"), to_uint8(comparison_sheet(views, result)))
         print(f"figures written to {args.json}; renders against the truth (rows: image, render, albedo, rendered albedo) in {sheet}")
+    return 0
+
+
+def _run_bench_export(args: argparse.Namespace) -> int:
+    import json
+
+    from .bench.export_bench import ExportBenchConfig, run_export_bench
+
+    figures = run_export_bench(ExportBenchConfig(args.grid, args.faces, args.texture))
+    print(json.dumps(figures, indent=2))
+    if args.json:
+        from .io.atomic_files import atomic_write_json
+
+        atomic_write_json(args.json, figures)
     return 0
 
 

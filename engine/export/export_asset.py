@@ -55,20 +55,18 @@ def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig()
     if not path.parent.exists():
         raise LirmUserError(f"cannot write {path}: the folder {path.parent} does not exist")
     seconds: dict[str, float] = {}
-    steps = 5
+    steps = 6
 
     def stage(name: str, k: int) -> float:
         if progress:
             progress(name, k, steps)
         return time.perf_counter()
 
-    t = stage("extracting the surface", 0)
-    mesh = extract_field_mesh(field_, config.mesh)
-    seconds["mesh"] = time.perf_counter() - t
-    t = stage(f"unwrapping {len(mesh.faces)} faces", 1)
+    mesh = extract_field_mesh(field_, config.mesh, progress=lambda message, k, n: stage(message, k), timings=seconds)
+    t = stage(f"unwrapping {len(mesh.faces)} faces", 3)
     uv_mesh = unwrap(mesh, AtlasConfig(config.texture_size, config.atlas_padding))
     seconds["unwrap"] = time.perf_counter() - t
-    t = stage(f"baking {config.texture_size}px textures", 2)
+    t = stage(f"baking {config.texture_size}px textures", 4)
     from lirm.renderer.context import create_headless_context
     from lirm.renderer.uv_raster import UVRasterizer
 
@@ -83,11 +81,11 @@ def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig()
             ctx.release()
     textures = bake_textures(field_, raster, config.bake)
     seconds["bake"] = time.perf_counter() - t
-    t = stage(f"writing {path.name}", 3)
+    t = stage(f"writing {path.name}", 5)
     textured = TexturedMesh(uv_mesh.positions, uv_mesh.normals, uv_mesh.tangents, uv_mesh.uvs, uv_mesh.faces,
                             textures.base_color_srgb8(), textures.metallic_roughness8(),
                             textures.normal8() if config.normal_map else None)
     write_glb(path, textured, world_transform)
     seconds["write"] = time.perf_counter() - t
-    stage("done", 5)
+    stage("done", 6)
     return ExportResult(path, len(uv_mesh.faces), len(uv_mesh.positions), config.texture_size, seconds, uv_mesh, textures)

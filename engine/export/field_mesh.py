@@ -8,6 +8,7 @@ the analytic ones (engine/model/analytic_fields.py), so every step is checked wi
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Callable
 
@@ -50,31 +51,42 @@ def field_sdf_grid(field, resolution: int, chunk: int = 262_144) -> tuple[np.nda
     return values, origin, spacing
 
 
-def extract_field_mesh(field, config: MeshExtractionConfig = MeshExtractionConfig(),
-                       progress: Progress | None = None) -> trimesh.Trimesh:
-    if progress:
-        progress("sampling the SDF", 0, 4)
+def extract_field_mesh(field, config: MeshExtractionConfig = MeshExtractionConfig(), progress: Progress | None = None,
+                       timings: dict[str, float] | None = None) -> trimesh.Trimesh:
+    """The cleaned, decimated surface; `timings` (if given) receives seconds per stage."""
+    timings = {} if timings is None else timings
+    clock = time.perf_counter()
+
+    def stage(name: str, message: str, k: int) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        if name:
+            timings[name] = now - clock
+        clock = now
+        if progress:
+            progress(message, k, 3)
+
+    stage("", f"sampling the SDF on a {config.resolution}^3 grid", 0)
     values, origin, spacing = field_sdf_grid(field, config.resolution, config.chunk)
+    check_has_surface(values)
+    stage("sdf_grid", "marching cubes", 1)
+    extracted = marching_cubes(values, origin, spacing)
+    mesh = trimesh.Trimesh(extracted.vertices, extracted.faces, process=True)
+    stage("marching_cubes", f"removing floaters, decimating {len(mesh.faces)} faces to {config.face_budget}", 2)
+    mesh = remove_floaters(mesh, config.floater_fraction, config.keep_all_significant)
+    if config.face_budget and len(mesh.faces) > config.face_budget:
+        mesh = decimate(mesh, config.face_budget)
+    stage("decimate", "surface done", 3)
+    return mesh
+
+
+def check_has_surface(values: np.ndarray) -> None:
     if values.min() >= 0:
         raise NoSurfaceError("the field has no surface: its SDF is positive everywhere (empty space); "
                              "nothing to extract. Add views of the object and run another update")
     if values.max() < 0:
         raise NoSurfaceError("the field has no surface: its SDF is negative everywhere (all inside); nothing to "
                              "extract. The reconstruction failed: check the capture's masks and run the update again")
-    if progress:
-        progress("marching cubes", 1, 4)
-    extracted = marching_cubes(values, origin, spacing)
-    mesh = trimesh.Trimesh(extracted.vertices, extracted.faces, process=True)
-    if progress:
-        progress("removing floaters", 2, 4)
-    mesh = remove_floaters(mesh, config.floater_fraction, config.keep_all_significant)
-    if config.face_budget and len(mesh.faces) > config.face_budget:
-        if progress:
-            progress(f"decimating {len(mesh.faces)} faces to {config.face_budget}", 3, 4)
-        mesh = decimate(mesh, config.face_budget)
-    if progress:
-        progress("done", 4, 4)
-    return mesh
 
 
 def remove_floaters(mesh: trimesh.Trimesh, fraction: float, keep_all_significant: bool = True) -> trimesh.Trimesh:
