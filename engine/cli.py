@@ -515,6 +515,11 @@ def _run_demo(args: argparse.Namespace) -> int:
     print()
     if "mask_iou_mean" in a:
         print(f"  automatic masks against the truth: IoU mean {a['mask_iou_mean']:.3f}, worst {a['mask_iou_min']:.3f}")
+    print(f"  reconstruction: {result.capture / 'reconstruction'}/ (weights: {result.weights})")
+    print(f"  exported asset: {result.asset}")
+    if not result.trained:
+        print("WARNING: no trained weights ship yet: the reconstruction and asset come from UNTRAINED weights and "
+              "do not look like the mug", file=sys.stderr)
     return 0
 
 

@@ -160,3 +160,11 @@ def test_demo_photographs_and_captures_a_builtin_object(tmp_path):
     # cameras' aim, one run in two put it half an object off (IoU 0.57). Now 0.956-0.971 in 5 runs.
     assert iou_mean >= 0.9
     assert len(list((tmp_path / "demo" / "capture" / "prepared").glob("*.npz"))) >= 12
+    # It ends with the exported asset, a valid glTF, and says plainly that the weights are untrained.
+    from lirm.engine.export.gltf_validation import validate_gltf
+
+    asset = tmp_path / "demo" / "asset.glb"
+    assert f"exported asset: {asset}" in out
+    report = validate_gltf(asset)
+    assert report.errors == 0, report.messages
+    assert "UNTRAINED" in proc.stderr
