@@ -148,6 +148,9 @@ def build_parser() -> argparse.ArgumentParser:
     bx.add_argument("--faces", type=int, default=20_000, help="face budget (default 20000)")
     bx.add_argument("--texture", type=int, default=1024, help="texture side (default 1024)")
     bx.add_argument("--json", type=Path, help="also write the figures here")
+    bx.add_argument("--model", type=Path, help="instead: round trip of this PBR model (as a field) through export, rendered against the original")
+    bx.add_argument("--env", default="studio", help="environment of that comparison (default studio)")
+    bx.add_argument("--sheet", type=Path, help="picture of the comparison: original (top) and exported (bottom) per view")
     bx.set_defaults(run=_run_bench_export)
 
     bs = bench_sub.add_parser("synth", help="synthetic training views per second, and a contact sheet of them")
@@ -570,9 +573,13 @@ def _run_bench_capacity(args: argparse.Namespace) -> int:
 def _run_bench_export(args: argparse.Namespace) -> int:
     import json
 
-    from .bench.export_bench import ExportBenchConfig, run_export_bench
+    from .bench.export_bench import ExportBenchConfig, RoundTripConfig, run_asset_round_trip, run_export_bench
 
-    figures = run_export_bench(ExportBenchConfig(args.grid, args.faces, args.texture))
+    if args.model:
+        figures = run_asset_round_trip(RoundTripConfig(args.model, args.env, grid=args.grid, faces=args.faces,
+                                                       texture=args.texture, sheet=args.sheet))
+    else:
+        figures = run_export_bench(ExportBenchConfig(args.grid, args.faces, args.texture))
     print(json.dumps(figures, indent=2))
     if args.json:
         from .io.atomic_files import atomic_write_json

@@ -91,16 +91,22 @@ def bake_textures(field, raster: UVRaster, config: BakeConfig = BakeConfig(), pr
         progress(f"querying the field at {len(idx)} texels", 0, 2)
     values = query_surface(field, raster.position.reshape(-1, 3)[idx], config)
     # Tangent space against the mesh's interpolated frame, as the shader rebuilds it.
+    n = values["normal"]
     n_mesh = raster.normal.reshape(-1, 3)[idx]
-    n_mesh /= np.maximum(np.linalg.norm(n_mesh, axis=1, keepdims=True), 1e-12)
     t = raster.tangent.reshape(-1, 4)[idx]
+    # Texels where the mesh's interpolated frame is degenerate (zero-length normals from the
+    # decimator) take the field's normal and a flat normal-map texel.
+    broken = ~np.isfinite(n_mesh).all(axis=1) | ~np.isfinite(t).all(axis=1)
+    n_mesh = np.where(broken[:, None], n, n_mesh)
+    t = np.where(broken[:, None], np.array([1.0, 0.0, 0.0, 1.0], np.float32), t)
+    n_mesh /= np.maximum(np.linalg.norm(n_mesh, axis=1, keepdims=True), 1e-12)
     tangent = t[:, :3] - n_mesh * np.sum(n_mesh * t[:, :3], axis=1, keepdims=True)
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
     bitangent = np.cross(n_mesh, tangent) * np.where(t[:, 3:] < 0.0, -1.0, 1.0)
-    n = values["normal"]
     local = np.stack([np.sum(n * tangent, 1), np.sum(n * bitangent, 1), np.sum(n * n_mesh, 1)], axis=1)
     local[:, 2] = np.maximum(local[:, 2], 0.05)  # a normal map cannot face away from its surface
     local /= np.linalg.norm(local, axis=1, keepdims=True)
+    local[broken | ~np.isfinite(local).all(axis=1)] = (0.0, 0.0, 1.0)
     if progress:
         progress("filling the gutters", 1, 2)
 
