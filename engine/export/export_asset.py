@@ -46,14 +46,31 @@ class ExportResult:
     textures: BakedTextures
 
 
+def _check_writable(path: Path) -> None:
+    """Refuse an output we could not write before spending minutes on the export."""
+    import tempfile
+
+    folder = path.parent
+    if not folder.exists():
+        raise LirmUserError(f"cannot write {path}: the folder {folder} does not exist")
+    if not folder.is_dir():
+        raise LirmUserError(f"cannot write {path}: {folder} is a file, not a folder")
+    if path.is_dir():
+        raise LirmUserError(f"cannot write {path}: it is a folder; name a .glb file")
+    try:
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=f".{path.name}.", suffix=".probe"):
+            pass
+    except OSError as err:
+        raise LirmUserError(f"cannot write {path} ({err.strerror}); choose a folder you can write to") from None
+
+
 def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig(), world_transform: np.ndarray | None = None,
                  progress: Progress | None = None, context=None) -> ExportResult:
     """`context`: a moderngl context to rasterise with (a headless one is made when None)."""
     path = Path(path)
     if path.suffix.lower() != ".glb":
         raise LirmUserError(f"{path}: the output must be a .glb file")
-    if not path.parent.exists():
-        raise LirmUserError(f"cannot write {path}: the folder {path.parent} does not exist")
+    _check_writable(path)
     seconds: dict[str, float] = {}
     steps = 6
 

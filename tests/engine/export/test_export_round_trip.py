@@ -85,6 +85,12 @@ def test_bad_output_paths_are_refused_and_existing_files_kept(tmp_path, gl_conte
         export_field(FIELD, tmp_path / "missing" / "a.glb", CONFIG, context=gl_context)
     with pytest.raises(LirmUserError, match="must be a .glb"):
         export_field(FIELD, tmp_path / "a.gltf", CONFIG, context=gl_context)
+    (tmp_path / "a_file").write_text("not a folder")
+    with pytest.raises(LirmUserError, match="is a file, not a folder"):
+        export_field(FIELD, tmp_path / "a_file" / "a.glb", CONFIG, context=gl_context)
+    (tmp_path / "folder.glb").mkdir()
+    with pytest.raises(LirmUserError, match="it is a folder"):
+        export_field(FIELD, tmp_path / "folder.glb", CONFIG, context=gl_context)
     existing = tmp_path / "keep.glb"
     existing.write_bytes(b"previous asset")
     read_only = tmp_path / "ro"
@@ -98,6 +104,13 @@ def test_bad_output_paths_are_refused_and_existing_files_kept(tmp_path, gl_conte
     finally:
         read_only.chmod(0o700)
     assert existing.read_bytes() == b"previous asset"
+    # A failed export (nothing to extract) leaves the existing file as it was, and no stray files.
+    from lirm.engine.export.field_mesh import NoSurfaceError
+
+    with pytest.raises(NoSurfaceError):
+        export_field(SphereField(sphere_radius=10.0), existing, CONFIG, context=gl_context)
+    assert existing.read_bytes() == b"previous asset"
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
 def test_exported_file_passes_the_khronos_validator(exported):
