@@ -90,6 +90,7 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("--grid", type=int, default=256, help="marching-cubes grid per side (default 256)")
     ex.add_argument("--checkpoint", type=Path, help="the weights the reconstruction was made with (default: as lirm reconstruct)")
     ex.add_argument("--no-normal-map", action="store_true", help="leave out the tangent-space normal map")
+    ex.add_argument("--obj", action="store_true", help="also write NAME.obj + NAME.mtl + PNG textures beside the .glb")
     ex.set_defaults(run=_run_export)
 
     tr = sub.add_parser("train", help="train LIRM on synthetic scenes: one stage of the coarse-to-fine schedule (torchrun for many GPUs)")
@@ -357,7 +358,7 @@ def _run_export(args: argparse.Namespace) -> int:
     if args.grid < 16:
         raise LirmUserError("--grid must be at least 16")
     config = ExportConfig(mesh=replace(MeshExtractionConfig(), resolution=args.grid, face_budget=args.faces),
-                          texture_size=args.texture, normal_map=not args.no_normal_map)
+                          texture_size=args.texture, normal_map=not args.no_normal_map, obj=args.obj)
     result, source = export_capture(args.capture, args.out, config, args.checkpoint,
                                     progress=lambda stage, done, total: print(f"[{done}/{total}] {stage}", file=sys.stderr))
     if not source.trained:

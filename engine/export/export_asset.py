@@ -29,6 +29,7 @@ class ExportConfig:
     atlas_padding: int = 4
     bake: BakeConfig = field(default_factory=BakeConfig)
     normal_map: bool = True
+    obj: bool = False  # also write NAME.obj + .mtl + PNGs beside the .glb
 
     def __post_init__(self) -> None:
         if not 64 <= self.texture_size <= 4096:
@@ -103,6 +104,10 @@ def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig()
                             textures.base_color_srgb8(), textures.metallic_roughness8(),
                             textures.normal8() if config.normal_map else None)
     write_glb(path, textured, world_transform)
+    if config.obj:
+        from .obj_writer import write_obj
+
+        write_obj(path.with_suffix(".obj"), textured, world_transform)
     seconds["write"] = time.perf_counter() - t
     stage("done", 6)
     return ExportResult(path, len(uv_mesh.faces), len(uv_mesh.positions), config.texture_size, seconds, uv_mesh, textures)

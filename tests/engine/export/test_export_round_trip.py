@@ -119,3 +119,17 @@ def test_exported_file_passes_the_khronos_validator(exported):
     report = validate_gltf(exported.path)
     assert report.errors == 0, report.messages
     assert report.warnings == 0, report.messages
+
+
+def test_obj_export_matches_the_glb(tmp_path, gl_context):
+    import trimesh
+
+    config = ExportConfig(mesh=MeshExtractionConfig(resolution=48, face_budget=1500), texture_size=128, obj=True)
+    result = export_field(FIELD, tmp_path / "asset.glb", config, context=gl_context)
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ["asset.glb", "asset.mtl", "asset.obj", "asset_basecolor.png", "asset_metallic.png",
+                     "asset_normal.png", "asset_roughness.png"]
+    obj = trimesh.load(tmp_path / "asset.obj", force="mesh", process=False)
+    glb = trimesh.load(tmp_path / "asset.glb", force="mesh", process=False)
+    assert len(obj.faces) == len(glb.faces) == result.faces
+    np.testing.assert_allclose(obj.bounds, glb.bounds, atol=1e-5)
