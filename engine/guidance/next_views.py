@@ -1,0 +1,96 @@
+"""Candidate viewpoints on the view sphere, and the greedy choice of the next k to shoot.
+
+Candidates: elevations -10..80 degrees, every `azimuth_step` degrees, at the capture's typical
+distance and field of view (what a photographer walking round the object can reach). Each candidate
+is worth the weighted area of the surface it would newly cover; the best is taken, its points count
+as covered, and the next is chosen the same way. Weights default to 1 (pure coverage); the model's
+uncertainty can raise them where the reconstruction is unsure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from lirm.engine.cameras import Camera, orbit_camera
+
+from .coverage import SurfaceCoverage
+
+
+@dataclass(frozen=True)
+class CandidateConfig:
+    elevations_deg: tuple[float, ...] = (-10.0, 0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0)
+    azimuth_step_deg: float = 15.0
+    size: int = 256
+
+
+@dataclass
+class Suggestion:
+    azimuth_deg: float
+    elevation_deg: float
+    distance: float
+    look_at: tuple[float, float, float]
+    gain: float  # share of the (weighted) surface this view newly covers
+    sentence: str
+    camera: Camera
+
+
+def camera_angles(camera: Camera, target: np.ndarray = np.zeros(3)) -> tuple[float, float, float]:
+    """(azimuth, elevation, distance) of a camera around `target`, in orbit_camera's convention."""
+    d = camera.center - target
+    distance = float(np.linalg.norm(d))
+    elevation = float(np.degrees(np.arcsin(np.clip(d[2] / max(distance, 1e-12), -1, 1))))
+    azimuth = float(np.degrees(np.arctan2(d[0], -d[1])) % 360.0)
+    return azimuth, elevation, distance
+
+
+def candidate_cameras(existing: list[Camera], config: CandidateConfig = CandidateConfig()) -> list[tuple[float, float, Camera]]:
+    distance = float(np.median([camera_angles(c)[2] for c in existing])) if existing else 2.5
+    fov = float(np.median([c.fov_x_deg for c in existing])) if existing else 50.0
+    out = []
+    for elevation in config.elevations_deg:
+        for azimuth in np.arange(0.0, 360.0, config.azimuth_step_deg):
+            out.append((float(azimuth), elevation, orbit_camera(float(azimuth), elevation, distance, config.size, config.size, fov)))
+    return out
+
+
+def describe_move(from_azimuth: float, from_elevation: float, to_azimuth: float, to_elevation: float) -> str:
+    """A photographer's sentence: azimuth grows counter-clockwise seen from above, which is walking to
+    one's right while facing the object."""
+    turn = (to_azimuth - from_azimuth + 180.0) % 360.0 - 180.0
+    parts = []
+    if abs(turn) >= 10.0:
+        side = "right" if turn > 0 else "left"
+        parts.append("go round to the other side" if abs(turn) > 150 else f"move {abs(turn):.0f}° to your {side}")
+    rise = to_elevation - from_elevation
+    if abs(rise) >= 10.0:
+        parts.append(f"{'raise' if rise > 0 else 'lower'} the camera by {abs(rise):.0f}°"
+                     + (" (look down on it)" if to_elevation >= 50 else " (from below)" if to_elevation < 0 else ""))
+    return (" and ".join(parts) or "shoot again from about here").capitalize()
+
+
+def suggest_next_views(coverage: SurfaceCoverage, existing: list[Camera], k: int = 4,
+                       weights: np.ndarray | None = None, config: CandidateConfig = CandidateConfig()) -> tuple[list[Suggestion], np.ndarray]:
+    """The next k views (greedy) and every candidate's initial gain as a (elevations, azimuths) heat map."""
+    weights = np.ones(len(coverage.points)) if weights is None else np.asarray(weights, np.float64)
+    total = float(weights.sum()) or 1.0
+    covered = coverage.covered(existing) > 0
+    candidates = candidate_cameras(existing, config)
+    seen = [coverage.seen(camera) for _, _, camera in candidates]
+    heat = np.array([float(weights[s & ~covered].sum()) / total for s in seen])
+    azimuths = np.arange(0.0, 360.0, config.azimuth_step_deg)
+    heat_map = heat.reshape(len(config.elevations_deg), len(azimuths))
+    last = camera_angles(existing[-1]) if existing else (0.0, 20.0, 2.5)
+    suggestions = []
+    for _ in range(k):
+        gains = [float(weights[s & ~covered].sum()) / total for s in seen]
+        best = int(np.argmax(gains))
+        if gains[best] <= 0:
+            break
+        azimuth, elevation, camera = candidates[best]
+        suggestions.append(Suggestion(azimuth, elevation, camera_angles(camera)[2], (0.0, 0.0, 0.0), gains[best],
+                                      describe_move(last[0], last[1], azimuth, elevation), camera))
+        covered |= seen[best]
+        last = (azimuth, elevation)
+    return suggestions, heat_map

@@ -1,0 +1,39 @@
+"""Next views: with only the front photographed, the first suggestions go round the back."""
+
+import numpy as np
+import trimesh
+
+from lirm.engine.cameras import orbit_camera
+from lirm.engine.guidance.coverage import SurfaceCoverage
+from lirm.engine.guidance.next_views import camera_angles, describe_move, suggest_next_views
+
+
+def test_camera_angles_invert_orbit_camera():
+    camera = orbit_camera(123.0, 35.0, 2.5, 64, 64, 50.0)
+    azimuth, elevation, distance = camera_angles(camera)
+    assert abs(azimuth - 123.0) < 1e-6 and abs(elevation - 35.0) < 1e-6 and abs(distance - 2.5) < 1e-9
+
+
+def test_sentences_speak_the_photographers_language():
+    assert describe_move(0, 20, 90, 20) == "Move 90° to your right"
+    assert describe_move(90, 20, 45, 50) == "Move 45° to your left and raise the camera by 30° (look down on it)"
+    assert describe_move(0, 20, 180, 20) == "Go round to the other side"
+    assert describe_move(0, 20, 5, 25) == "Shoot again from about here"
+
+
+def test_front_only_capture_gets_sent_round_the_back(renderer):
+    mesh = trimesh.creation.icosphere(3, radius=0.6)
+    mesh.vertices[:, 2] *= 0.8
+    coverage = SurfaceCoverage(renderer, mesh.vertices, mesh.faces, mesh.vertex_normals)
+    try:
+        front = [orbit_camera(a, 20.0, 2.5, 96, 96, 50.0) for a in (-30.0, 0.0, 30.0)]
+        before = (coverage.covered(front) > 0).mean()
+        suggestions, heat = suggest_next_views(coverage, front, k=3)
+        assert 0.2 < before < 0.7
+        first = suggestions[0]
+        assert abs((first.azimuth_deg - 180.0 + 180.0) % 360.0 - 180.0) <= 60.0, first
+        assert heat.shape == (10, 24) and heat.max() == first.gain
+        after = (coverage.covered(front + [s.camera for s in suggestions]) > 0).mean()
+        assert after > before + 0.3
+    finally:
+        coverage.release()
