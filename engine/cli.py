@@ -93,6 +93,13 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("--obj", action="store_true", help="also write NAME.obj + NAME.mtl + PNG textures beside the .glb")
     ex.set_defaults(run=_run_export)
 
+    sg = sub.add_parser("suggest", help="where to shoot next: ranked views, a sentence each, and a view-sphere heat map")
+    sg.add_argument("capture", type=Path, help="a capture folder (with or without a reconstruction)")
+    sg.add_argument("--k", type=int, default=4, help="how many views to suggest (default 4)")
+    sg.add_argument("--heat-map", type=Path, help="write the view-sphere heat map here (default CAPTURE/guidance/heat_map.png)")
+    sg.add_argument("--checkpoint", type=Path, help="the weights the reconstruction was made with (default: as lirm reconstruct)")
+    sg.set_defaults(run=_run_suggest)
+
     tr = sub.add_parser("train", help="train LIRM on synthetic scenes: one stage of the coarse-to-fine schedule (torchrun for many GPUs)")
     tr.add_argument("--preset", default="tiny", choices=["tiny", "small", "paper"], help="model and schedule size (default tiny)")
     tr.add_argument("--stage", type=int, default=1, choices=[1, 2, 3], help="stage of the supplementary's schedule (default 1)")
@@ -365,6 +372,36 @@ def _run_export(args: argparse.Namespace) -> int:
         print(f"WARNING: exported from UNTRAINED weights ({source.description}): the asset does not look like the object", file=sys.stderr)
     timings = ", ".join(f"{k} {v:.1f} s" for k, v in result.seconds.items())
     print(f"{result.path}: {result.faces} faces, {result.vertices} vertices, {result.texture_size}px textures ({timings})")
+    return 0
+
+
+def _run_suggest(args: argparse.Namespace) -> int:
+    from .guidance.suggest import suggest_for_capture, write_heat_map
+    from lirm.renderer.context import create_headless_context
+    from lirm.renderer.pbr_renderer import PBRRenderer
+
+    if args.k < 1:
+        raise LirmUserError("--k must be at least 1")
+    if not (args.capture / "capture.json").exists():
+        raise LirmUserError(f"{args.capture} is not a capture folder (no capture.json); make one with `lirm capture`")
+    ctx = create_headless_context()
+    renderer = PBRRenderer(ctx)
+    try:
+        result = suggest_for_capture(renderer, args.capture, args.k, args.checkpoint)
+    finally:
+        renderer.release()
+        ctx.release()
+    for note in result.notes:
+        print(f"note: {note}", file=sys.stderr)
+    print(f"surface: {result.surface}; covered now {100 * result.coverage_before:.0f}%, "
+          f"after these shots {100 * result.coverage_after:.0f}%")
+    for n, s in enumerate(result.suggestions, start=1):
+        print(f"{n}. azimuth {s.azimuth_deg:.0f}°, elevation {s.elevation_deg:.0f}°, distance {s.distance:.2f}: "
+              f"{s.sentence} (+{100 * s.gain:.0f}% of the surface)")
+    if not result.suggestions:
+        print("the surface is covered from every reachable angle: no more views needed")
+    heat_path = args.heat_map or args.capture / "guidance" / "heat_map.png"
+    print(f"heat map: {write_heat_map(heat_path, result.heat_map, result.suggestions)}")
     return 0
 
 

@@ -37,3 +37,21 @@ def test_front_only_capture_gets_sent_round_the_back(renderer):
         assert after > before + 0.3
     finally:
         coverage.release()
+
+
+def test_lirm_suggest_on_a_capture_with_and_without_a_reconstruction(lego_capture, tmp_path, capsys):
+    import shutil
+
+    import cv2
+
+    from lirm.engine.cli import main
+
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    assert main(["suggest", str(capture), "--k", "3"]) == 0
+    captured = capsys.readouterr()
+    assert "no reconstruction yet" in captured.err and "surface: bounding sphere" in captured.out
+    assert "1. azimuth" in captured.out and "3. azimuth" in captured.out
+    heat = cv2.imread(str(capture / "guidance" / "heat_map.png"))
+    assert heat is not None and heat.shape[1] > 24 * 24
+    assert main(["suggest", str(tmp_path / "nowhere")]) == 2

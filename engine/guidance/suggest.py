@@ -1,0 +1,100 @@
+"""`lirm suggest CAPTURE`: where to shoot next, for a capture as it stands.
+
+The surface is the latest reconstruction's mesh (marching cubes at a coarse grid) or, before any
+reconstruction, the object's bounding sphere (the capture is normalised so that the object fits the
+unit sphere), with a message saying so. Cameras are the capture's posed views in its normalised frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+import trimesh
+
+from lirm.engine.capture.capture_folder import Capture
+from lirm.engine.errors import LirmUserError
+from lirm.engine.io.images import write_png
+
+from .coverage import SurfaceCoverage
+from .next_views import CandidateConfig, Suggestion, suggest_next_views
+
+
+@dataclass
+class CaptureSuggestions:
+    suggestions: list[Suggestion]
+    heat_map: np.ndarray  # (elevations, azimuths) gain of each candidate
+    coverage_before: float  # share of the surface covered now
+    coverage_after: float  # ... once the suggestions are shot
+    vertex_coverage: np.ndarray  # (V,) cameras seeing each vertex well
+    surface: str  # where the surface came from
+    notes: list[str]
+
+
+def _surface(capture: Capture, checkpoint, grid: int) -> tuple[trimesh.Trimesh, str, list[str]]:
+    notes = []
+    if capture.updates:
+        from lirm.engine.export.capture_export import latest_state_path
+        from lirm.engine.export.field_mesh import MeshExtractionConfig, NoSurfaceError, extract_field_mesh
+        from lirm.engine.model.pretrained import load_model
+        from lirm.engine.model.state_file import load_state
+
+        import json
+
+        summary = capture.root / "reconstruction" / "summary.json"
+        preset = json.loads(summary.read_text())["preset"] if summary.is_file() else "small"
+        source = load_model(checkpoint, preset)
+        try:
+            mesh = extract_field_mesh(source.model.decode(load_state(latest_state_path(capture))),
+                                      MeshExtractionConfig(resolution=grid, face_budget=5000))
+            return mesh, f"reconstruction after update {len(capture.updates)}", notes
+        except NoSurfaceError as err:
+            notes.append(f"the reconstruction has no surface yet ({err}); using the bounding sphere instead")
+    else:
+        notes.append("no reconstruction yet: suggestions come from how the cameras cover the object's bounding sphere")
+    return trimesh.creation.icosphere(3, radius=0.8), "bounding sphere", notes
+
+
+def suggest_for_capture(renderer, capture_dir: str | Path, k: int = 4, checkpoint=None, grid: int = 64) -> CaptureSuggestions:
+    capture = Capture.open(capture_dir)
+    cameras = [capture.cameras[f] for f in sorted(capture.cameras)]
+    if not cameras:
+        raise LirmUserError(f"{capture.root} has no posed views yet: run `lirm capture` on it first")
+    mesh, surface, notes = _surface(capture, checkpoint, grid)
+    if len(cameras) == 1:
+        notes.append("only one view so far: every suggestion is about getting round the object")
+    spread = np.ptp([c.center for c in cameras], axis=0).max() if len(cameras) > 1 else 0.0
+    if len(cameras) > 1 and spread < 0.05:
+        notes.append("all views were taken from about the same spot: walk round the object")
+    coverage = SurfaceCoverage(renderer, mesh.vertices, mesh.faces, mesh.vertex_normals)
+    try:
+        vertex_coverage = coverage.covered(cameras)
+        suggestions, heat = suggest_next_views(coverage, cameras, k, config=CandidateConfig())
+        after = coverage.covered(cameras + [s.camera for s in suggestions])
+    finally:
+        coverage.release()
+    return CaptureSuggestions(suggestions, heat, float((vertex_coverage > 0).mean()), float((after > 0).mean()),
+                              vertex_coverage, surface, notes)
+
+
+def write_heat_map(path: Path, heat: np.ndarray, suggestions: list[Suggestion], config: CandidateConfig = CandidateConfig()) -> Path:
+    """Azimuth across, elevation up; brighter = more surface gained; suggestions numbered."""
+    cell = 24
+    rows, cols = heat.shape
+    norm = heat / max(float(heat.max()), 1e-9)
+    image = cv2.applyColorMap((norm[::-1] * 255).astype(np.uint8), cv2.COLORMAP_INFERNO)
+    image = cv2.resize(image, (cols * cell, rows * cell), interpolation=cv2.INTER_NEAREST)
+    pad = np.full((rows * cell + 30, cols * cell + 40, 3), 255, np.uint8)
+    pad[:rows * cell, 40:] = image
+    for r, elevation in enumerate(config.elevations_deg[::-1]):
+        cv2.putText(pad, f"{elevation:.0f}", (2, r * cell + 16), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
+    for c in range(0, cols, 3):
+        cv2.putText(pad, f"{c * config.azimuth_step_deg:.0f}", (40 + c * cell, rows * cell + 18), cv2.FONT_HERSHEY_SIMPLEX,
+                    0.4, (0, 0, 0), 1, cv2.LINE_AA)
+    for n, s in enumerate(suggestions, start=1):
+        c = int(round(s.azimuth_deg / config.azimuth_step_deg)) % cols
+        r = rows - 1 - list(config.elevations_deg).index(s.elevation_deg)
+        cv2.putText(pad, str(n), (40 + c * cell + 7, r * cell + 17), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (80, 255, 80), 2, cv2.LINE_AA)
+    return write_png(path, pad[..., ::-1])
