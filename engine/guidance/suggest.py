@@ -1,7 +1,8 @@
 """`lirm suggest CAPTURE`: where to shoot next, for a capture as it stands.
 
-The surface is the latest reconstruction's mesh (marching cubes at a coarse grid) or, before any
-reconstruction, the object's bounding sphere (the capture is normalised so that the object fits the
+The surface is the latest reconstruction's mesh (marching cubes at a coarse grid), weighted by the
+model's uncertainty (uncertainty.py: change over the last two updates, view dependence, thin
+evidence), or, before any reconstruction, the object's bounding sphere (the capture is normalised so that the object fits the
 unit sphere), with a message saying so. Cameras are the capture's posed views in its normalised frame.
 """
 
@@ -33,7 +34,8 @@ class CaptureSuggestions:
     notes: list[str]
 
 
-def _surface(capture: Capture, checkpoint, grid: int) -> tuple[trimesh.Trimesh, str, list[str]]:
+def _surface(capture: Capture, checkpoint, grid: int) -> tuple[trimesh.Trimesh, str, list[str], list]:
+    """The surface to cover, where it came from, notes for the user, and the last two updates' fields."""
     notes = []
     if capture.updates:
         from lirm.engine.export.capture_export import latest_state_path
@@ -46,15 +48,17 @@ def _surface(capture: Capture, checkpoint, grid: int) -> tuple[trimesh.Trimesh, 
         summary = capture.root / "reconstruction" / "summary.json"
         preset = json.loads(summary.read_text())["preset"] if summary.is_file() else "small"
         source = load_model(checkpoint, preset)
+        states = [capture.root / u["state"] for u in capture.updates[-2:]]
+        fields = [source.model.decode(load_state(path)) for path in states if path.is_file()]
         try:
             mesh = extract_field_mesh(source.model.decode(load_state(latest_state_path(capture))),
                                       MeshExtractionConfig(resolution=grid, face_budget=5000))
-            return mesh, f"reconstruction after update {len(capture.updates)}", notes
+            return mesh, f"reconstruction after update {len(capture.updates)}", notes, fields
         except NoSurfaceError as err:
             notes.append(f"the reconstruction has no surface yet ({err}); using the bounding sphere instead")
     else:
         notes.append("no reconstruction yet: suggestions come from how the cameras cover the object's bounding sphere")
-    return trimesh.creation.icosphere(3, radius=0.8), "bounding sphere", notes
+    return trimesh.creation.icosphere(3, radius=0.8), "bounding sphere", notes, []
 
 
 def suggest_for_capture(renderer, capture_dir: str | Path, k: int = 4, checkpoint=None, grid: int = 64) -> CaptureSuggestions:
@@ -62,7 +66,12 @@ def suggest_for_capture(renderer, capture_dir: str | Path, k: int = 4, checkpoin
     cameras = [capture.cameras[f] for f in sorted(capture.cameras)]
     if not cameras:
         raise LirmUserError(f"{capture.root} has no posed views yet: run `lirm capture` on it first")
-    mesh, surface, notes = _surface(capture, checkpoint, grid)
+    mesh, surface, notes, fields = _surface(capture, checkpoint, grid)
+    weights = None
+    if fields:
+        from .uncertainty import guidance_weights, vertex_uncertainty
+
+        weights = guidance_weights(vertex_uncertainty(fields, mesh.vertices, mesh.vertex_normals)["total"])
     if len(cameras) == 1:
         notes.append("only one view so far: every suggestion is about getting round the object")
     spread = np.ptp([c.center for c in cameras], axis=0).max() if len(cameras) > 1 else 0.0
@@ -71,7 +80,7 @@ def suggest_for_capture(renderer, capture_dir: str | Path, k: int = 4, checkpoin
     coverage = SurfaceCoverage(renderer, mesh.vertices, mesh.faces, mesh.vertex_normals)
     try:
         vertex_coverage = coverage.covered(cameras)
-        suggestions, heat = suggest_next_views(coverage, cameras, k, config=CandidateConfig())
+        suggestions, heat = suggest_next_views(coverage, cameras, k, weights=weights, config=CandidateConfig())
         after = coverage.covered(cameras + [s.camera for s in suggestions])
     finally:
         coverage.release()

@@ -55,3 +55,19 @@ def test_lirm_suggest_on_a_capture_with_and_without_a_reconstruction(lego_captur
     heat = cv2.imread(str(capture / "guidance" / "heat_map.png"))
     assert heat is not None and heat.shape[1] > 24 * 24
     assert main(["suggest", str(tmp_path / "nowhere")]) == 2
+
+
+def test_lirm_suggest_after_reconstruction_uses_the_mesh(lego_capture, tmp_path, capsys):
+    import shutil
+
+    from lirm.engine.cli import main
+
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    assert main(["reconstruct", str(capture), "--updates", "2", "--preset", "tiny", "--novel-views", "1",
+                 "--render-size", "24", "--grid-resolution", "48"]) == 0
+    capsys.readouterr()
+    assert main(["suggest", str(capture), "--k", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "surface: reconstruction after update 2" in out
+    assert "1. azimuth" in out
