@@ -405,11 +405,13 @@ def _run_suggest(args: argparse.Namespace) -> int:
     return 0
 
 
-def _scene_config(args: argparse.Namespace, rank0: bool):
-    """Built-in objects and environments plus the user's folders (each file checked, bad ones reported)."""
+def _scene_config(args: argparse.Namespace, base, rank0: bool):
+    """`base` with the built-in objects and environments plus the user's folders (each file checked,
+    bad ones reported)."""
+    from dataclasses import replace
+
     from .synth.asset_folders import scan_environment_folder, scan_model_folder
     from .synth.procedural_objects import BUILTIN_OBJECTS
-    from .synth.training_scenes import TrainingSceneConfig
     from lirm.renderer.procedural_environments import PROCEDURAL_ENVIRONMENTS
 
     objects = () if args.no_builtin_objects else tuple(BUILTIN_OBJECTS)
@@ -426,12 +428,11 @@ def _scene_config(args: argparse.Namespace, rank0: bool):
         if rank0:
             print(scan.report("environments"), file=sys.stderr)
         environments += tuple(str(p) for p in scan.usable)
-    return TrainingSceneConfig(objects=objects, environments=environments)
+    return replace(base, objects=objects, environments=environments)
 
 
 def _run_train(args: argparse.Namespace) -> int:
     import os
-    from dataclasses import replace
 
     from .model.config import preset as model_preset
     from .train.trainer import TrainConfig, describe, run_training, scene_config_for
@@ -441,9 +442,7 @@ def _run_train(args: argparse.Namespace) -> int:
         if value is not None and value < 1:
             raise LirmUserError(f"--{name.replace('_', '-')} must be at least 1")
     rank0 = os.environ.get("RANK", "0") == "0"
-    size = model_preset(args.preset).image_size
-    scenes = replace(_scene_config(args, rank0), size=scene_config_for(size).size,
-                     environment_width=scene_config_for(size).environment_width)
+    scenes = _scene_config(args, scene_config_for(model_preset(args.preset).image_size), rank0)
     config = TrainConfig(preset=args.preset, stage=args.stage, out_dir=str(args.out), max_steps=args.max_steps,
                          stage_steps=args.stage_steps, resume=str(args.resume) if args.resume else None,
                          data_seed=args.data_seed, scene_pool=args.scene_pool,
@@ -478,7 +477,6 @@ def _run_train(args: argparse.Namespace) -> int:
 
 
 def _run_eval(args: argparse.Namespace) -> int:
-
     from .evaluation.evaluate import EvalConfig, evaluate_heldout
     from .evaluation.report import markdown_table
     from .io.atomic_files import atomic_write, atomic_write_json

@@ -106,7 +106,7 @@ def _reconstruct_and_export(capture_dir: Path, asset_path: Path, config: DemoCon
     say("exporting the asset (surface, UV atlas, baked PBR textures, .glb)")
     export = ExportConfig(mesh=replace(MeshExtractionConfig(), resolution=config.export_grid, face_budget=config.export_faces),
                           texture_size=config.export_texture)
-    result, _ = export_capture(capture_dir, asset_path, export)
+    result, _ = export_capture(capture_dir, asset_path, export, source=source)
     return result.path, source
 
 

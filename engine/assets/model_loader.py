@@ -27,6 +27,7 @@ import trimesh
 from lirm.engine.errors import AssetLoadError
 from lirm.renderer.material import PBRMaterial
 from lirm.renderer.mesh import MeshData
+from lirm.renderer.tonemap import srgb_to_linear
 
 from .gltf_document import GltfDocument, read_gltf
 
@@ -405,7 +406,7 @@ def _load_obj(path: Path, warnings: list[str]) -> list[MeshData]:
             if getattr(visual, "kind", None) == "vertex":
                 # OBJ vertex colours are display colours (sRGB); MeshData wants linear.
                 rgba = np.asarray(visual.vertex_colors, np.float32) / 255.0
-                colors = np.concatenate([_srgb_to_linear(rgba[:, :3]), rgba[:, 3:]], axis=1)
+                colors = np.concatenate([srgb_to_linear(rgba[:, :3]).astype(np.float32), rgba[:, 3:]], axis=1)
         mesh = _build_mesh(
             path, name, matrix, geom, material, warnings,
             normals=geom.vertex_normals, uvs=_uvs_from_trimesh(geom), colors=colors,
@@ -626,6 +627,3 @@ def _decode(image, keep_alpha: bool) -> np.ndarray | None:
         log.debug("texture decode failed: %s", err)
         return None
 
-
-def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).astype(np.float32)

@@ -21,6 +21,7 @@ import numpy as np
 
 from lirm.engine.assets.asset_source import resolve_asset
 from lirm.engine.assets.environment_files import resolve_environment
+from lirm.engine.assets.model_loader import LoadedModel
 from lirm.engine.orbit_render import normalizing_transform
 from lirm.engine.synth.evaluation_protocol import ProtocolConfig, ProtocolViews, protocol_views
 from lirm.engine.synth.object_views import ObjectViews, render_meshes
@@ -44,11 +45,10 @@ class HeldoutObject:
     inputs_prepared: bool = False  # the views are already the capture's crops (a real capture)
 
 
-def _render_object(renderer: PBRRenderer, name: str, meshes, environment, rotation_deg: float, turn_deg: float,
+def _render_object(renderer: PBRRenderer, name: str, model: LoadedModel, environment, rotation_deg: float, turn_deg: float,
                    protocol: ProtocolViews, surface_points: int, seed: int) -> HeldoutObject:
-    bounds_min = np.min([m.positions.min(0) for m in meshes], axis=0)
-    bounds_max = np.max([m.positions.max(0) for m in meshes], axis=0)
-    transform = normalizing_transform(np.stack([bounds_min, bounds_max]))
+    meshes = model.meshes
+    transform = normalizing_transform(model.bounds)
     c, s = np.cos(np.radians(turn_deg)), np.sin(np.radians(turn_deg))
     transform = np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]]) @ transform
     transform[:3] *= OBJECT_RADIUS
@@ -81,7 +81,7 @@ def synthetic_heldout(renderer: PBRRenderer, count: int = 8, size: int = 128, se
         rotation, turn = float(rng.uniform(0, 360)), float(rng.uniform(0, 360))
         model = resolve_asset(name, seed=variant)
         env = resolve_environment(env_name, width=512)
-        objects.append(_render_object(renderer, f"{name}#{i}", model.meshes, env, rotation, turn,
+        objects.append(_render_object(renderer, f"{name}#{i}", model, env, rotation, turn,
                                       protocol_views(config, i), surface_points, seed + i))
     return objects
 
@@ -95,7 +95,7 @@ def gltf_heldout(renderer: PBRRenderer, models: list[Path], environments: list[P
         env = resolve_environment(environments[i % len(environments)])
         model = resolve_asset(path)
         rotation = float(rng.uniform(0, 360))
-        objects.append(_render_object(renderer, Path(path).stem, model.meshes, env, rotation, 0.0,
+        objects.append(_render_object(renderer, Path(path).stem, model, env, rotation, 0.0,
                                       protocol_views(config, i), surface_points, seed + i))
     return objects
 

@@ -21,6 +21,14 @@ from lirm.engine.model.state_file import load_state
 from .export_asset import ExportConfig, ExportResult, Progress, export_field
 
 
+def reconstruction_model(capture: Capture, checkpoint: str | Path | None = None) -> ModelSource:
+    """The model that decodes the capture's reconstruction states: `checkpoint`, else the preset the
+    reconstruction recorded in its summary.json (the shipped or untrained weights of that preset)."""
+    summary_path = capture.root / "reconstruction" / "summary.json"
+    preset = json.loads(summary_path.read_text())["preset"] if summary_path.is_file() else "small"
+    return load_model(checkpoint, preset)
+
+
 def latest_state_path(capture: Capture) -> Path:
     if not capture.updates:
         raise LirmUserError(f"{capture.root} has no reconstruction yet: run `lirm reconstruct {capture.root}` first")
@@ -41,12 +49,12 @@ def export_transform(capture: Capture) -> np.ndarray:
 
 
 def export_capture(capture_dir: str | Path, out_path: str | Path, config: ExportConfig = ExportConfig(),
-                   checkpoint: str | Path | None = None, progress: Progress | None = None) -> tuple[ExportResult, ModelSource]:
+                   checkpoint: str | Path | None = None, progress: Progress | None = None,
+                   source: ModelSource | None = None) -> tuple[ExportResult, ModelSource]:
+    """`source`: the model already loaded by the caller (else reconstruction_model's choice)."""
     capture = Capture.open(capture_dir)
     state_path = latest_state_path(capture)
-    summary_path = capture.root / "reconstruction" / "summary.json"
-    preset = json.loads(summary_path.read_text())["preset"] if summary_path.is_file() else "small"
-    source = load_model(checkpoint, preset)
+    source = source or reconstruction_model(capture, checkpoint)
     state = load_state(state_path)
     field = source.model.decode(state)  # a state of another architecture is refused here, by name
     return export_field(field, out_path, config, export_transform(capture), progress), source

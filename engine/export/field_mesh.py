@@ -17,6 +17,7 @@ import torch
 import trimesh
 
 from lirm.engine.errors import LirmUserError
+from lirm.engine.model.field import device_of
 
 from .marching_cubes import marching_cubes, sample_sdf_grid
 
@@ -38,7 +39,7 @@ class NoSurfaceError(LirmUserError):
 
 def field_sdf_grid(field, resolution: int, chunk: int = 262_144) -> tuple[np.ndarray, np.ndarray, float]:
     """The field's SDF on a resolution^3 grid spanning its bounding cube: (values, origin, spacing)."""
-    device = _device_of(field)
+    device = device_of(field)
 
     @torch.no_grad()
     def sdf(points: np.ndarray) -> np.ndarray:
@@ -108,7 +109,3 @@ def decimate(mesh: trimesh.Trimesh, faces: int) -> trimesh.Trimesh:
     simplified.remove_unreferenced_vertices()
     return simplified
 
-
-def _device_of(field) -> torch.device:
-    planes = getattr(field, "planes", None)
-    return planes.device if isinstance(planes, torch.Tensor) else torch.device("cpu")

@@ -15,11 +15,11 @@ import struct
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from lirm.engine.errors import LirmUserError
 from lirm.engine.io.atomic_files import atomic_write
+from lirm.engine.io.images import encode_png
 
 Z_UP_TO_Y_UP = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0, -1.0, 0, 0], [0, 0, 0, 1.0]])
 
@@ -39,13 +39,6 @@ class TexturedMesh:
     metallic_roughness: np.ndarray  # (S, S, 3) uint8: R occlusion/unused, G roughness, B metallic
     normal_map: np.ndarray | None  # (S, S, 3) uint8 tangent space
     name: str = "lirm_asset"
-
-
-def _png(image: np.ndarray) -> bytes:
-    ok, data = cv2.imencode(".png", np.ascontiguousarray(image[..., ::-1]))  # RGB -> OpenCV's BGR
-    if not ok:
-        raise RuntimeError("PNG encoding failed")
-    return data.tobytes()
 
 
 def to_gltf_frame(mesh: TexturedMesh, world_transform: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -99,10 +92,10 @@ def glb_bytes(mesh: TexturedMesh, world_transform: np.ndarray | None = None) -> 
         attributes["TANGENT"] = add_accessor(tangents, "VEC4", FLOAT, ARRAY_BUFFER)
     indices = add_accessor(mesh.faces.astype(np.uint32).reshape(-1), "SCALAR", UNSIGNED_INT, ELEMENT_ARRAY_BUFFER)
 
-    images = [{"bufferView": add_view(_png(mesh.base_color_srgb)), "mimeType": "image/png", "name": "baseColor"},
-              {"bufferView": add_view(_png(mesh.metallic_roughness)), "mimeType": "image/png", "name": "metallicRoughness"}]
+    images = [{"bufferView": add_view(encode_png(mesh.base_color_srgb)), "mimeType": "image/png", "name": "baseColor"},
+              {"bufferView": add_view(encode_png(mesh.metallic_roughness)), "mimeType": "image/png", "name": "metallicRoughness"}]
     if mesh.normal_map is not None:
-        images.append({"bufferView": add_view(_png(mesh.normal_map)), "mimeType": "image/png", "name": "normal"})
+        images.append({"bufferView": add_view(encode_png(mesh.normal_map)), "mimeType": "image/png", "name": "normal"})
     material = {"name": f"{mesh.name}_material",
                 "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "metallicRoughnessTexture": {"index": 1},
                                          "metallicFactor": 1.0, "roughnessFactor": 1.0}}

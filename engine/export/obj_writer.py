@@ -9,20 +9,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from lirm.engine.errors import LirmUserError
 from lirm.engine.io.atomic_files import atomic_write
+from lirm.engine.io.images import write_png
 
 from .glb_writer import TexturedMesh, to_gltf_frame
-
-
-def _write_png(path: Path, image: np.ndarray) -> None:
-    ok, data = cv2.imencode(".png", np.ascontiguousarray(image[..., ::-1] if image.ndim == 3 else image))
-    if not ok:
-        raise RuntimeError(f"PNG encoding failed for {path}")
-    atomic_write(path, lambda tmp: tmp.write_bytes(data.tobytes()))
 
 
 def write_obj(path: str | Path, mesh: TexturedMesh, world_transform: np.ndarray | None = None) -> list[Path]:
@@ -37,7 +30,7 @@ def write_obj(path: str | Path, mesh: TexturedMesh, world_transform: np.ndarray 
         textures[f"{stem}_normal.png"] = mesh.normal_map
     written = []
     for name, image in textures.items():
-        _write_png(path.with_name(name), image)
+        write_png(path.with_name(name), image)
         written.append(path.with_name(name))
     mtl = [f"newmtl {stem}", "Kd 1 1 1", "Pr 1", "Pm 1", f"map_Kd {stem}_basecolor.png",
            f"map_Pr {stem}_roughness.png", f"map_Pm {stem}_metallic.png"]

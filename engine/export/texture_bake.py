@@ -18,7 +18,10 @@ import cv2
 import numpy as np
 import torch
 
+from lirm.engine.io.images import to_uint8
+from lirm.engine.model.field import device_of
 from lirm.engine.model.volume_renderer import numerical_normals
+from lirm.renderer.tonemap import linear_to_srgb
 from lirm.renderer.uv_raster import UVRaster
 
 Progress = Callable[[str, int, int], None]
@@ -40,36 +43,24 @@ class BakedTextures:
     covered: np.ndarray  # (S, S) bool: texels the mesh covers
 
     def base_color_srgb8(self) -> np.ndarray:
-        return _srgb8(self.base_color)
+        return to_uint8(linear_to_srgb(np.clip(self.base_color, 0.0, 1.0)))
 
     def metallic_roughness8(self) -> np.ndarray:
         """glTF's metallicRoughness texture: R unused (occlusion slot, white), G roughness, B metallic, all linear."""
         s = self.roughness.shape[0]
-        return np.stack([np.full((s, s), 255, np.uint8), _unorm8(self.roughness), _unorm8(self.metallic)], axis=-1)
+        return np.stack([np.full((s, s), 255, np.uint8), to_uint8(self.roughness), to_uint8(self.metallic)], axis=-1)
 
     def normal8(self) -> np.ndarray:
-        return _unorm8(self.normal * 0.5 + 0.5)
+        return to_uint8(self.normal * 0.5 + 0.5)
 
 
-def _unorm8(a: np.ndarray) -> np.ndarray:
-    return np.round(np.clip(a, 0.0, 1.0) * 255.0).astype(np.uint8)
 
-
-def _srgb8(linear: np.ndarray) -> np.ndarray:
-    c = np.clip(linear, 0.0, 1.0)
-    srgb = np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1.0 / 2.4) - 0.055)
-    return _unorm8(srgb)
-
-
-def _device_of(field) -> torch.device:
-    planes = getattr(field, "planes", None)
-    return planes.device if isinstance(planes, torch.Tensor) else torch.device("cpu")
 
 
 @torch.no_grad()
 def query_surface(field, points: np.ndarray, config: BakeConfig = BakeConfig()) -> dict[str, np.ndarray]:
     """The field's materials and normal at the surface points nearest to `points` (N, 3)."""
-    device = _device_of(field)
+    device = device_of(field)
     out = {"albedo": [], "roughness": [], "metallic": [], "normal": []}
     for start in range(0, len(points), config.chunk):
         p = torch.from_numpy(np.ascontiguousarray(points[start:start + config.chunk], np.float32)).to(device)

@@ -38,21 +38,16 @@ def _surface(capture: Capture, checkpoint, grid: int) -> tuple[trimesh.Trimesh, 
     """The surface to cover, where it came from, notes for the user, and the last two updates' fields."""
     notes = []
     if capture.updates:
-        from lirm.engine.export.capture_export import latest_state_path
+        from lirm.engine.export.capture_export import latest_state_path, reconstruction_model
         from lirm.engine.export.field_mesh import MeshExtractionConfig, NoSurfaceError, extract_field_mesh
-        from lirm.engine.model.pretrained import load_model
         from lirm.engine.model.state_file import load_state
 
-        import json
-
-        summary = capture.root / "reconstruction" / "summary.json"
-        preset = json.loads(summary.read_text())["preset"] if summary.is_file() else "small"
-        source = load_model(checkpoint, preset)
-        states = [capture.root / u["state"] for u in capture.updates[-2:]]
-        fields = [source.model.decode(load_state(path)) for path in states if path.is_file()]
+        model = reconstruction_model(capture, checkpoint).model
+        latest = model.decode(load_state(latest_state_path(capture)))
+        previous_state = capture.root / capture.updates[-2]["state"] if len(capture.updates) > 1 else None
+        fields = ([model.decode(load_state(previous_state))] if previous_state and previous_state.is_file() else []) + [latest]
         try:
-            mesh = extract_field_mesh(source.model.decode(load_state(latest_state_path(capture))),
-                                      MeshExtractionConfig(resolution=grid, face_budget=5000))
+            mesh = extract_field_mesh(latest, MeshExtractionConfig(resolution=grid, face_budget=5000))
             return mesh, f"reconstruction after update {len(capture.updates)}", notes, fields
         except NoSurfaceError as err:
             notes.append(f"the reconstruction has no surface yet ({err}); using the bounding sphere instead")

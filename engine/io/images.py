@@ -13,8 +13,8 @@ import numpy as np
 from .atomic_files import atomic_write, atomic_write_bytes
 
 
-def write_png(path: str | Path, image: np.ndarray) -> Path:
-    """uint8 or uint16 (H, W), (H, W, 3) RGB or (H, W, 4) RGBA."""
+def encode_png(image: np.ndarray) -> bytes:
+    """PNG bytes of uint8 or uint16 (H, W), (H, W, 3) RGB or (H, W, 4) RGBA."""
     image = np.asarray(image)
     if image.dtype not in (np.uint8, np.uint16):
         raise TypeError(f"PNG needs uint8 or uint16 data, got {image.dtype}")
@@ -24,8 +24,13 @@ def write_png(path: str | Path, image: np.ndarray) -> Path:
         image = image[:, :, [2, 1, 0, 3]]
     ok, encoded = cv2.imencode(".png", np.ascontiguousarray(image))
     if not ok:
-        raise OSError(f"could not encode {path} as PNG")
-    return atomic_write_bytes(path, encoded.tobytes())
+        raise OSError("could not encode the image as PNG")
+    return encoded.tobytes()
+
+
+def write_png(path: str | Path, image: np.ndarray) -> Path:
+    """uint8 or uint16 (H, W), (H, W, 3) RGB or (H, W, 4) RGBA, written atomically."""
+    return atomic_write_bytes(path, encode_png(image))
 
 
 def to_uint8(values: np.ndarray) -> np.ndarray:

@@ -109,6 +109,12 @@ class Field:
         )
 
 
+def device_of(field) -> torch.device:
+    """Where a field's tensors live: the decoded LIRM field's planes, else the CPU (analytic fields)."""
+    planes = getattr(field, "planes", None)
+    return planes.device if isinstance(planes, torch.Tensor) else torch.device("cpu")
+
+
 def volsdf_density(sdf: torch.Tensor, beta: float | torch.Tensor) -> torch.Tensor:
     """sigma = 1/2 exp(-s/beta) for s >= 0, 1 - 1/2 exp(s/beta) for s < 0 (paper eq. 9, as written;
     VolSDF scales it by 1/beta, which the renderer applies)."""

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import torch
 
-from .field import volsdf_density
+from .field import device_of, volsdf_density
 
 
 @dataclass(frozen=True)
@@ -46,7 +46,7 @@ class OccupancyGrid:
         centres_1d = (torch.arange(g, dtype=torch.float32) + 0.5) * voxel - radius
         half_diagonal = 0.5 * math.sqrt(3.0) * voxel
         occupied = torch.empty(g * g * g, dtype=torch.bool)
-        device = _device_of(field)
+        device = device_of(field)
         for start in range(0, g * g * g, config.chunk):
             # Voxel centres of this chunk from their flat [ix, iy, iz] indices (the whole 250^3 grid
             # of coordinates would be 190 MB).
@@ -67,7 +67,3 @@ class OccupancyGrid:
         idx = idx.clamp(0, g - 1)
         return inside & self.occupied[idx[..., 0], idx[..., 1], idx[..., 2]]
 
-
-def _device_of(field) -> torch.device:
-    planes = getattr(field, "planes", None)
-    return planes.device if isinstance(planes, torch.Tensor) else torch.device("cpu")

@@ -16,10 +16,7 @@ from scipy.spatial import cKDTree
 
 from lirm.engine.model.field import FieldSample
 from lirm.renderer.mesh import MeshData
-
-
-def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+from lirm.renderer.tonemap import srgb_to_linear
 
 
 def _lookup(texture: np.ndarray | None, uv: np.ndarray) -> np.ndarray | None:
@@ -64,7 +61,7 @@ class MeshSampledField:
             base = np.tile(np.asarray(mat.base_color_factor[:3], np.float32), (count, 1))
             tex = _lookup(mat.base_color_texture, uv)
             if tex is not None:
-                base = base * _srgb_to_linear(tex[:, :3])
+                base = base * srgb_to_linear(tex[:, :3]).astype(np.float32)
             rough = np.full(count, mat.roughness_factor, np.float32)
             metal = np.full(count, mat.metallic_factor, np.float32)
             mr = _lookup(mat.metallic_roughness_texture, uv)

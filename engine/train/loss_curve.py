@@ -12,7 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from lirm.engine.io.atomic_files import atomic_write
+from lirm.engine.io.images import write_png
 
 COLOURS = [(200, 80, 30), (40, 140, 40), (30, 60, 200), (150, 40, 150), (20, 150, 200), (120, 120, 120)]
 
@@ -82,6 +82,4 @@ def write_loss_curves(metrics_csv: Path, out_png: Path, columns: list[str] | Non
     if "step" not in metrics or len(metrics["step"]) < 2:
         return None
     columns = columns or ["loss", "colour", "albedo", "normal", "perceptual", "roughness"]
-    image = draw_loss_curves(metrics, columns, title=title)
-    ok, data = cv2.imencode(".png", image[..., ::-1].copy())  # RGB colours above -> OpenCV's BGR
-    return atomic_write(out_png, lambda tmp: tmp.write_bytes(data.tobytes()))
+    return write_png(out_png, draw_loss_curves(metrics, columns, title=title))
