@@ -74,7 +74,8 @@ def build_parser() -> argparse.ArgumentParser:
     rec = sub.add_parser("reconstruct", help="run progressive LIRM updates on a prepared capture; pictures after each update")
     rec.add_argument("capture", type=Path, help="a capture folder made by `lirm capture`")
     rec.add_argument("--checkpoint", type=Path, help="model weights (.safetensors); default: the shipped checkpoint, else UNTRAINED weights")
-    rec.add_argument("--preset", default="small", choices=["tiny", "small", "paper"], help="model size when no checkpoint is given (default small)")
+    rec.add_argument("--preset", choices=["tiny", "small", "paper"],
+                     help="model size when no checkpoint is given (default: the shipped checkpoint's, see resources/checkpoints/MODEL_CARD.md)")
     rec.add_argument("--views-per-update", type=int, default=4, help="views fed to each update (default 4)")
     rec.add_argument("--updates", type=int, help="stop after this many updates (default: until the views run out)")
     rec.add_argument("--novel-views", type=int, default=4, help="orbit views rendered after each update (default 4)")
@@ -122,7 +123,7 @@ def build_parser() -> argparse.ArgumentParser:
     tr.set_defaults(run=_run_train)
 
     ev = sub.add_parser("eval", help="the paper's metrics after updates 1-4 on a held-out set, as a Markdown table")
-    ev.add_argument("checkpoint", type=Path, help="model weights (.safetensors), e.g. a training checkpoint")
+    ev.add_argument("checkpoint", type=Path, nargs="?", help="model weights (.safetensors), e.g. a training checkpoint (default: the shipped checkpoint)")
     ev.add_argument("--set", default="synthetic", help="synthetic (default), gltf, or a capture folder")
     ev.add_argument("--objects", type=int, default=4, help="objects of the synthetic set (default 4)")
     ev.add_argument("--size", type=int, default=128, help="side of the protocol views in pixels (default 128)")
@@ -131,8 +132,19 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--models", type=Path, default=Path("../shared/data/pbr_models"), help="glTF folder of the gltf set")
     ev.add_argument("--environments", type=Path, default=Path("../shared/data/envmaps"), help="HDR folder of the gltf set")
     ev.add_argument("--mesh-resolution", type=int, default=96, help="marching-cubes grid for the Chamfer distance (default 96)")
+    ev.add_argument("--baselines", action="store_true",
+                    help="also score the untrained network of the same architecture and a sphere of the inputs' mean colour on the same views")
     ev.add_argument("-o", "--out", type=Path, help="also write the table (.md) and the numbers (.json beside it)")
     ev.set_defaults(run=_run_eval)
+
+    sh = sub.add_parser("ship", help="a training checkpoint as shippable fp16 weights with a model card made from the run's files")
+    sh.add_argument("checkpoint", type=Path, help="the training checkpoint to ship")
+    sh.add_argument("--runs", type=Path, nargs="+", required=True, help="the lirm train output folders, one per stage")
+    sh.add_argument("--eval", type=Path, action="append", default=[], help="a lirm eval table (.md) for the card; repeatable")
+    sh.add_argument("--notes", type=Path, help="Markdown appended to the card: limitations, what was looked at")
+    sh.add_argument("--note", default="", help="one sentence stored in the weights and shown to users whenever they are used")
+    sh.add_argument("-o", "--out", type=Path, required=True, help="the weights to write, e.g. resources/checkpoints/lirm-tiny.safetensors")
+    sh.set_defaults(run=_run_ship)
 
     bench = sub.add_parser("bench", help="benchmarks")
     bench_sub = bench.add_subparsers(title="benchmarks", metavar="BENCH", required=True)
@@ -344,6 +356,8 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
     finally:
         bar.close()
     print(f"weights: {source.description}" + ("" if source.trained else "  (UNTRAINED)"))
+    if source.note:
+        print(f"about these weights: {source.note}")
     for r in result.updates:
         print(f"update {r.update}: {len(r.frames)} views ({', '.join(r.frames)}) in {r.seconds:.2f} s; "
               f"renders in {r.render_seconds:.1f} s ({100 * r.skipped_samples:.0f}% of samples skipped) -> {args.capture / r.out_dir}/")
@@ -477,37 +491,61 @@ def _run_train(args: argparse.Namespace) -> int:
 
 
 def _run_eval(args: argparse.Namespace) -> int:
+    from .evaluation.baselines import MeanColourSphere, untrained_model
     from .evaluation.evaluate import EvalConfig, evaluate_heldout
-    from .evaluation.report import markdown_table
+    from .evaluation.report import comparison_table, markdown_table
     from .io.atomic_files import atomic_write, atomic_write_json
-    from .model.checkpoint import load_checkpoint
+    from .model.pretrained import load_model
 
     for name in ("objects", "size", "updates", "mesh_resolution"):
         if getattr(args, name) < 1:
             raise LirmUserError(f"--{name.replace('_', '-')} must be at least 1")
-    model, extra = load_checkpoint(args.checkpoint)
+    source = load_model(args.checkpoint)
+    if source.warning:
+        print(source.warning, file=sys.stderr)
+    model = source.model
     config = EvalConfig(updates=args.updates, output_views=args.output_views, mesh_resolution=args.mesh_resolution)
     objects = _heldout_objects(args)
-    bar = _progress_bar(len(objects), "evaluating")
-    bar.unit = "object"
+    training = source.extra.get("training", {})
+    label = (args.checkpoint.name if args.checkpoint else source.description) + (
+        f" (stage {training['stage']}, step {training['step']})" if training else "")
+    contenders = [(label, model)]
+    if args.baselines:
+        contenders += [(f"untrained '{model.config.name}' (seed 0)", untrained_model(model.config)),
+                       ("mean-colour sphere", MeanColourSphere(model.config.image_size, model.config.radius))]
+    results = []
+    for name, reconstructor in contenders:
+        bar = _progress_bar(len(objects), f"evaluating {name}")
+        bar.unit = "object"
 
-    def progress(message: str, done: int, total: int) -> None:
-        bar.n = done
-        bar.set_description(message)
-        bar.refresh()
+        def progress(message: str, done: int, total: int) -> None:
+            bar.n = done
+            bar.set_description(message)
+            bar.refresh()
 
-    try:
-        result = evaluate_heldout(model, objects, config, set_name=args.set, progress=progress)
-    finally:
-        bar.close()
-    training = extra.get("training", {})
-    title = f"{args.checkpoint.name}: '{model.config.name}' model" + (
-        f", stage {training['stage']} step {training['step']}" if training else "")
-    table = markdown_table(result, title)
+        try:
+            results.append((name, evaluate_heldout(reconstructor, objects, config, set_name=args.set, progress=progress)))
+        finally:
+            bar.close()
+    if len(results) == 1:
+        table = markdown_table(results[0][1], f"{label}: '{model.config.name}' model")
+    else:
+        table = comparison_table(results, f"'{model.config.name}' model against the baselines")
     print(table)
     if args.out:
         atomic_write(args.out, lambda tmp: tmp.write_text(table, encoding="utf-8"))
-        atomic_write_json(args.out.with_suffix(".json"), {"checkpoint": str(args.checkpoint), **result.to_dict()})
+        atomic_write_json(args.out.with_suffix(".json"), {
+            "checkpoint": str(args.checkpoint) if args.checkpoint else source.description,
+            **results[0][1].to_dict(),
+            "baselines": {name: result.to_dict() for name, result in results[1:]}})
+    return 0
+
+
+def _run_ship(args: argparse.Namespace) -> int:
+    from .train.ship import ship
+
+    weights, card = ship(args.checkpoint, args.out, args.runs, args.eval, args.notes, args.note)
+    print(f"wrote {weights} ({weights.stat().st_size / 2**20:.2f} MB) and {card}")
     return 0
 
 
@@ -556,6 +594,8 @@ def _run_demo(args: argparse.Namespace) -> int:
         print(f"  automatic masks against the truth: IoU mean {a['mask_iou_mean']:.3f}, worst {a['mask_iou_min']:.3f}")
     print(f"  reconstruction: {result.capture / 'reconstruction'}/ (weights: {result.weights})")
     print(f"  exported asset: {result.asset}")
+    if result.relit:
+        print(f"  relit: {result.relit} (rows, top to bottom: {'; '.join(result.relit_rows)})")
     if not result.trained:
         print("WARNING: no trained weights ship yet: the reconstruction and asset come from UNTRAINED weights and "
               "do not look like the mug", file=sys.stderr)

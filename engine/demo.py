@@ -5,9 +5,10 @@
    from 16 orbit views and saved as JPEG photos, with the true cameras and masks kept aside.
 3. The whole capture pipeline on those photos as if a user had taken them (COLMAP posing,
    normalisation, automatic masks, crops), and its pose and mask accuracy against the truth.
-4. Progressive LIRM updates on that capture, and the asset exported as `asset.glb` (a validated,
-   textured PBR glTF). Until trained weights ship, the weights are untrained and the demo says so:
-   the asset is a blob, not the mug.
+4. Progressive LIRM updates on that capture with the shipped weights (untrained ones when none ship,
+   said loudly), and the asset exported as `asset.glb` (a validated, textured PBR glTF).
+5. `relit.png`: the asset beside the original object under two built-in environments the photos were
+   not taken in, from four sides.
 """
 
 from __future__ import annotations
@@ -37,7 +38,8 @@ class DemoConfig:
     environment_width: int = 1024
     shoot: SyntheticCaptureConfig = field(default_factory=SyntheticCaptureConfig)
     shoot_environment: str = "sky"
-    preset: str = "small"  # the model used when no checkpoint ships
+    relight_environments: tuple[str, ...] = ("studio", "overcast")  # not the shoot's: relighting, not replay
+    preset: str | None = None  # the model preset; None: the shipped checkpoint's (untrained small when none ships)
     export_grid: int = 128
     export_faces: int = 20_000
     export_texture: int = 512
@@ -53,6 +55,8 @@ class DemoResult:
     asset: Path | None = None
     weights: str = ""
     trained: bool = False
+    relit: Path | None = None
+    relit_rows: list[str] = field(default_factory=list)
 
 
 def run_demo(out_dir: str | Path, config: DemoConfig = DemoConfig(), progress: Callable[[str], None] | None = None) -> DemoResult:
@@ -88,7 +92,26 @@ def run_demo(out_dir: str | Path, config: DemoConfig = DemoConfig(), progress: C
     accuracy = capture_accuracy(summary.capture, shoot.cameras, {f"shot_{k}": m for k, m in shoot.masks.items()})
     accuracy["registered"] = f"{summary.registered}/{len(shoot.images)}"
     asset, source = _reconstruct_and_export(capture_dir, out_dir / "asset.glb", config, say)
-    return DemoResult(out_dir, overview, photos, capture_dir, accuracy, asset, source.description, source.trained)
+    say(f"relighting the asset beside the original under {' and '.join(config.relight_environments)}")
+    relit, rows = _relight(asset, out_dir / "relit.png", config)
+    return DemoResult(out_dir, overview, photos, capture_dir, accuracy, asset, source.description, source.trained, relit, rows)
+
+
+def _relight(asset: Path, path: Path, config: DemoConfig) -> tuple[Path, list[str]]:
+    from .assets.model_loader import load_model as load_asset
+    from .relight_sheet import relit_sheet
+
+    original = resolve_asset(config.shoot.object_name, seed=config.shoot.seed)
+    environments = {name: make_procedural_environment(name, width=config.environment_width // 2)
+                    for name in config.relight_environments}
+    ctx = create_headless_context()
+    renderer = PBRRenderer(ctx)
+    try:
+        return relit_sheet(renderer, [(f"original {config.shoot.object_name}", original), ("exported asset", load_asset(asset))],
+                           environments, path)
+    finally:
+        renderer.release()
+        ctx.release()
 
 
 def _reconstruct_and_export(capture_dir: Path, asset_path: Path, config: DemoConfig, say: Callable[[str], None]):
@@ -102,6 +125,8 @@ def _reconstruct_and_export(capture_dir: Path, asset_path: Path, config: DemoCon
 
     source = load_model(None, config.preset)
     say(f"reconstructing with LIRM ({source.description}{'' if source.trained else ', UNTRAINED'})")
+    if source.note:
+        say(f"about these weights: {source.note}")
     run_reconstruction(capture_dir, source, replace(ReconstructConfig(), novel_views=2, render_size=96))
     say("exporting the asset (surface, UV atlas, baked PBR textures, .glb)")
     export = ExportConfig(mesh=replace(MeshExtractionConfig(), resolution=config.export_grid, face_budget=config.export_faces),

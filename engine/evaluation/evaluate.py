@@ -10,14 +10,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import Callable
+from typing import Callable, Protocol
 
 import numpy as np
 import torch
 
 from lirm.engine.export.marching_cubes import extract_mesh
 from lirm.engine.metrics import psnr, scaled_albedo_psnr, ssim
-from lirm.engine.model.lirm import LIRM
 from lirm.engine.model.occupancy_grid import OccupancyConfig, OccupancyGrid
 from lirm.engine.model.volume_renderer import VolumeRenderConfig, render_camera
 from lirm.engine.synth.view_crops import crop_like_capture, resize_views
@@ -27,6 +26,18 @@ from .chamfer import chamfer_distance, surface_samples
 from .heldout_sets import HeldoutObject
 
 Progress = Callable[[str, int, int], None]
+
+
+class ProgressiveReconstructor(Protocol):
+    """What the evaluation drives: LIRM, or a baseline of evaluation/baselines.py."""
+
+    config: object  # has `image_size`, the side of the input views
+
+    def initial_state(self, batch: int = 1): ...
+
+    def update(self, state, views): ...
+
+    def decode(self, state): ...
 
 
 @dataclass(frozen=True)
@@ -82,10 +93,13 @@ def _field_mesh_points(field, config: EvalConfig, device) -> np.ndarray:
 
 
 @torch.no_grad()
-def evaluate_heldout(model: LIRM, objects: list[HeldoutObject], config: EvalConfig = EvalConfig(), set_name: str = "synthetic",
+def evaluate_heldout(model: ProgressiveReconstructor, objects: list[HeldoutObject], config: EvalConfig = EvalConfig(), set_name: str = "synthetic",
                      progress: Progress | None = None, cancel: Callable[[], bool] | None = None) -> EvalResult:
-    model.eval()
-    device = next(model.parameters()).device
+    if isinstance(model, torch.nn.Module):
+        model.eval()
+        device = next(model.parameters()).device
+    else:
+        device = torch.device("cpu")
     per_update: dict[int, dict[str, list[float]]] = {u: {} for u in range(1, config.updates + 1)}
     size = model.config.image_size
     ok, why = lpips_available()

@@ -15,21 +15,46 @@ def _fmt(value: float | None, digits: int) -> str:
     return f"{value:.{digits}f}"
 
 
+HEADER = "| PSNR ↑ | SSIM ↑ | LPIPS ↓ | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ | CD ↓ | views |"
+NOTES = ("PSNR/SSIM: novel views over white. Albedo PSNR after Stanford-ORB's per-channel scale; "
+         "roughness, metallic and albedo on the object's pixels. CD: symmetric Chamfer distance of the "
+         "marching-cubes mesh to the true surface, in units of the bounding-sphere radius.")
+
+
+def _cells(r) -> str:
+    return (f"{_fmt(r.psnr, 2)} | {_fmt(r.ssim, 3)} | {_fmt(r.lpips, 3)} | {_fmt(r.albedo_psnr, 2)} | "
+            f"{_fmt(r.roughness_psnr, 2)} | {_fmt(r.metallic_psnr, 2)} | {_fmt(r.chamfer, 4)} | {r.views} |")
+
+
 def markdown_table(result: EvalResult, title: str | None = None) -> str:
     lines = []
     if title:
         lines += [f"### {title}", ""]
     lines += [f"Set: {result.set_name}, {len(result.objects)} objects ({', '.join(result.objects)}).", ""]
-    lines.append("| after update | PSNR ↑ | SSIM ↑ | LPIPS ↓ | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ | CD ↓ | views |")
+    lines.append("| after update " + HEADER)
     lines.append("|---|---|---|---|---|---|---|---|---|")
     for r in result.rows:
-        lines.append(f"| {r.update} | {_fmt(r.psnr, 2)} | {_fmt(r.ssim, 3)} | {_fmt(r.lpips, 3)} | {_fmt(r.albedo_psnr, 2)} | "
-                     f"{_fmt(r.roughness_psnr, 2)} | {_fmt(r.metallic_psnr, 2)} | {_fmt(r.chamfer, 4)} | {r.views} |")
+        lines.append(f"| {r.update} | " + _cells(r))
     lines.append("")
-    notes = ["PSNR/SSIM: novel views over white. Albedo PSNR after Stanford-ORB's per-channel scale; "
-             "roughness, metallic and albedo on the object's pixels. CD: symmetric Chamfer distance of the "
-             "marching-cubes mesh to the true surface, in units of the bounding-sphere radius."]
+    notes = [NOTES]
     if result.lpips_note:
         notes.append(result.lpips_note + ".")
     lines += notes
+    return "\n".join(lines) + "\n"
+
+
+def comparison_table(results: list[tuple[str, EvalResult]], title: str | None = None) -> str:
+    """Several reconstructors scored on the same views, one row per (reconstructor, update)."""
+    lines = [f"### {title}", ""] if title else []
+    first = results[0][1]
+    lines += [f"Set: {first.set_name}, {len(first.objects)} objects ({', '.join(first.objects)}); "
+              "every row scored on the same input and output views.", ""]
+    lines.append("| reconstructor | after update " + HEADER)
+    lines.append("|---|---|---|---|---|---|---|---|---|---|")
+    for name, result in results:
+        for r in result.rows:
+            lines.append(f"| {name} | {r.update} | " + _cells(r))
+    lines += ["", NOTES]
+    notes = sorted({result.lpips_note for _, result in results if result.lpips_note})
+    lines += [note + "." for note in notes]
     return "\n".join(lines) + "\n"

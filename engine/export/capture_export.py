@@ -25,7 +25,7 @@ def reconstruction_model(capture: Capture, checkpoint: str | Path | None = None)
     """The model that decodes the capture's reconstruction states: `checkpoint`, else the preset the
     reconstruction recorded in its summary.json (the shipped or untrained weights of that preset)."""
     summary_path = capture.root / "reconstruction" / "summary.json"
-    preset = json.loads(summary_path.read_text())["preset"] if summary_path.is_file() else "small"
+    preset = json.loads(summary_path.read_text())["preset"] if summary_path.is_file() else None
     return load_model(checkpoint, preset)
 
 

@@ -1,9 +1,9 @@
 """Which weights a reconstruction uses: a checkpoint the user names, else the one shipped under
-resources/checkpoints/, else freshly initialised weights, which are untrained and say so.
+resources/checkpoints/ (of the preset asked for, or when none is asked for, the largest shipped), else
+freshly initialised weights, which are untrained and say so.
 
-No trained checkpoint ships yet (issue 7 trains it), so without --checkpoint the model is untrained:
-its output is the s_bias prior's small sphere with noise, not the object. Callers must show
-`ModelSource.warning` where the user sees it.
+Untrained output is the s_bias prior's small sphere with noise, not the object: callers must show
+`ModelSource.warning` where the user sees it. See resources/checkpoints/MODEL_CARD.md for what ships.
 """
 
 from __future__ import annotations
@@ -18,7 +18,9 @@ from .checkpoint import load_checkpoint
 from .config import preset
 from .lirm import LIRM
 
+# In order of preference when no preset is asked for: the largest model that ships.
 SHIPPED = {"small": "lirm-small.safetensors", "tiny": "lirm-tiny.safetensors"}
+DEFAULT_PRESET = "small"  # what an untrained fallback builds when nothing ships
 
 
 @dataclass
@@ -27,6 +29,12 @@ class ModelSource:
     trained: bool
     description: str  # where the weights came from, for logs and summaries
     extra: dict
+
+    @property
+    def note(self) -> str | None:
+        """What the weights' maker says the user should know (shipped checkpoints carry one)."""
+        note = self.extra.get("note")
+        return str(note) if note else None
 
     @property
     def warning(self) -> str | None:
@@ -44,8 +52,14 @@ def shipped_checkpoint(preset_name: str) -> Path | None:
     return path if path.exists() else None
 
 
-def load_model(checkpoint: str | Path | None = None, preset_name: str = "small", device: str | torch.device = "cpu",
+def default_preset() -> str:
+    """The preset used when the user names none: the largest one that ships trained weights."""
+    return next((name for name in SHIPPED if shipped_checkpoint(name) is not None), DEFAULT_PRESET)
+
+
+def load_model(checkpoint: str | Path | None = None, preset_name: str | None = None, device: str | torch.device = "cpu",
                seed: int = 0) -> ModelSource:
+    preset_name = preset_name or default_preset()
     if checkpoint is not None:
         model, extra = load_checkpoint(checkpoint, device=device)
         return ModelSource(model, bool(extra.get("trained", False)), f"checkpoint {checkpoint}", extra)

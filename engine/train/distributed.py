@@ -8,6 +8,7 @@ seed includes the rank); DistributedDataParallel averages the gradients.
 from __future__ import annotations
 
 import os
+import platform
 from dataclasses import dataclass
 
 import torch
@@ -43,6 +44,19 @@ def init_process_group(device: str = "auto") -> ProcessGroupInfo:
     if world > 1 and not dist.is_initialized():
         dist.init_process_group(backend="nccl" if use_cuda else "gloo")
     return ProcessGroupInfo(rank, world, local, dev)
+
+
+def hardware_description(info: ProcessGroupInfo) -> str:
+    """What a run trained on, for its run.json and the model card, e.g. "1 x NVIDIA H100 80GB HBM3"."""
+    if info.device.type == "cuda":
+        return f"{info.world_size} x {torch.cuda.get_device_name(info.device)}"
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            cpu = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), cpu)
+    except OSError:
+        pass
+    return f"{info.world_size} process(es) on CPU: {cpu}, {os.cpu_count()} cores, {torch.get_num_threads()} torch threads"
 
 
 def shutdown(info: ProcessGroupInfo) -> None:

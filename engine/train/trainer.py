@@ -40,7 +40,7 @@ from lirm.engine.model.occupancy_grid import OccupancyConfig
 from lirm.engine.model.volume_renderer import VolumeRenderConfig
 from lirm.engine.synth.training_scenes import GENERATOR_VERSION, TrainingSceneConfig
 
-from .distributed import ProcessGroupInfo, any_process, init_process_group, mean_over_processes, shutdown
+from .distributed import ProcessGroupInfo, any_process, hardware_description, init_process_group, mean_over_processes, shutdown
 from .losses import LossWeights
 from .objective import TrainingObjective
 from .perceptual import perceptual_loss
@@ -220,7 +220,8 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
                         batch_size=None, num_workers=config.workers, persistent_workers=False)
     occupancy = OccupancyConfig(resolution=stage.occupancy_resolution) if stage.occupancy_grid else None
     run = {"config": config.to_dict(), "stage": stage.to_dict(), "generator_version": GENERATOR_VERSION,
-           "world_size": info.world_size, "perceptual": type(objective.perceptual).__name__}
+           "world_size": info.world_size, "hardware": hardware_description(info),
+           "perceptual": type(objective.perceptual).__name__}
 
     writer, metrics, evaluator = None, None, None
     if info.is_main:

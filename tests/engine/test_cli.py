@@ -26,7 +26,7 @@ def run_cli(capsys, *args: str) -> tuple[int, str, str]:
 
 def test_help_lists_only_built_subcommands():
     out = subprocess.run([*LIRM, "--help"], capture_output=True, text=True, check=True).stdout
-    for command in ("demo", "render", "capture", "reconstruct", "export", "suggest", "train", "eval", "bench"):
+    for command in ("demo", "render", "capture", "reconstruct", "export", "suggest", "train", "eval", "ship", "bench"):
         assert f"    {command} " in out
     for not_yet in ("app",):
         assert f"    {not_yet} " not in out
@@ -160,11 +160,15 @@ def test_demo_photographs_and_captures_a_builtin_object(tmp_path):
     # cameras' aim, one run in two put it half an object off (IoU 0.57). Now 0.956-0.971 in 5 runs.
     assert iou_mean >= 0.9
     assert len(list((tmp_path / "demo" / "capture" / "prepared").glob("*.npz"))) >= 12
-    # It ends with the exported asset, a valid glTF, and says plainly that the weights are untrained.
+    # It ends with the exported asset, a valid glTF, made with the shipped weights and their caveat.
     from lirm.engine.export.gltf_validation import validate_gltf
 
     asset = tmp_path / "demo" / "asset.glb"
     assert f"exported asset: {asset}" in out
     report = validate_gltf(asset)
     assert report.errors == 0, report.messages
-    assert "UNTRAINED" in proc.stderr
+    assert "shipped checkpoint lirm-tiny.safetensors" in out and "about these weights: " in proc.stderr
+    assert "UNTRAINED" not in proc.stderr
+    relit = cv2.imread(str(tmp_path / "demo" / "relit.png"))
+    assert relit is not None and relit.shape[:2] == (4 * 192, 4 * 192) and relit.std() > 10  # 2 assets x 2 HDRIs, 4 sides
+    assert "rows, top to bottom: original mug under studio; exported asset under studio" in out

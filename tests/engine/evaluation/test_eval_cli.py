@@ -53,16 +53,18 @@ def test_eval_scores_every_update(renderer):
 def test_lirm_eval_writes_the_markdown_table(tmp_path, tiny_checkpoint):
     out = tmp_path / "table.md"
     cmd = [sys.executable, "-m", "lirm.engine.cli", "eval", str(tiny_checkpoint), "--objects", "1", "--size", "32",
-           "--output-views", "2", "--mesh-resolution", "24", "-o", str(out)]
+           "--output-views", "2", "--mesh-resolution", "24", "--updates", "2", "--baselines", "-o", str(out)]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     table = out.read_text()
     assert table in done.stdout
-    assert "| after update | PSNR ↑ | SSIM ↑ | LPIPS ↓ | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ | CD ↓ |" in table
-    for update in range(1, 5):
-        assert f"\n| {update} | " in table
+    assert "| reconstructor | after update | PSNR ↑ | SSIM ↑ | LPIPS ↓ | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ | CD ↓ |" in table
+    for name in ("tiny.safetensors", "untrained 'tiny' (seed 0)", "mean-colour sphere"):
+        for update in (1, 2):
+            assert f"| {name} | {update} | " in table
     numbers = json.loads(out.with_suffix(".json").read_text())
-    assert [r["update"] for r in numbers["rows"]] == [1, 2, 3, 4]
+    assert [r["update"] for r in numbers["rows"]] == [1, 2]
+    assert set(numbers["baselines"]) == {"untrained 'tiny' (seed 0)", "mean-colour sphere"}
 
 
 def test_lirm_eval_refuses_a_bad_set_and_a_missing_checkpoint(tmp_path, tiny_checkpoint):

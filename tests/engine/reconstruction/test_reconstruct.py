@@ -16,6 +16,7 @@ from lirm.engine.capture.capture_folder import Capture
 from lirm.engine.cli import main
 from lirm.engine.model.checkpoint import save_checkpoint
 from lirm.engine.model.config import preset
+from lirm.engine.model import pretrained
 from lirm.engine.model.lirm import LIRM
 from lirm.engine.model.state_file import load_state, save_state
 from lirm.engine.reconstruction.session import update_sets
@@ -28,9 +29,10 @@ def test_update_sets_split_in_frame_order():
     assert update_sets(list("abcdefghij"), 4, 2) == [list("abcd"), list("efgh")]
 
 
-def test_reconstruct_writes_each_update_and_warns_when_untrained(lego_capture, tmp_path, capsys):
+def test_reconstruct_writes_each_update_and_warns_when_untrained(lego_capture, tmp_path, capsys, monkeypatch):
     capture = tmp_path / "capture"
     shutil.copytree(lego_capture, capture)
+    monkeypatch.setattr(pretrained, "SHIPPED", {})  # as if no trained weights shipped
     assert main(["reconstruct", str(capture), "--updates", "2"] + FAST) == 0
     out, err = capsys.readouterr()
     assert "UNTRAINED" in err and "UNTRAINED" in out
@@ -79,11 +81,24 @@ def test_state_files_round_trip_and_refuse_garbage(tmp_path):
     assert np.isfinite(back.plane_tokens.numpy()).all()
 
 
-def test_export_writes_a_valid_glb_of_the_latest_update(lego_capture, tmp_path, capsys):
+def test_reconstruct_uses_the_shipped_checkpoint_by_default(lego_capture, tmp_path, capsys):
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    assert pretrained.shipped_checkpoint("tiny") is not None and pretrained.default_preset() == "tiny"
+    assert main(["reconstruct", str(capture), "--updates", "1"] + FAST[2:]) == 0
+    out, err = capsys.readouterr()
+    assert "UNTRAINED" not in err + out and "weights: shipped checkpoint lirm-tiny.safetensors" in out
+    assert "about these weights: " in out  # the card's one-line caveat travels with the weights
+    summary = json.loads((capture / "reconstruction" / "summary.json").read_text())
+    assert summary["trained"] is True and summary["preset"] == "tiny"
+
+
+def test_export_writes_a_valid_glb_of_the_latest_update(lego_capture, tmp_path, capsys, monkeypatch):
     from lirm.engine.export.gltf_validation import validate_gltf
 
     capture = tmp_path / "capture"
     shutil.copytree(lego_capture, capture)
+    monkeypatch.setattr(pretrained, "SHIPPED", {})  # untrained weights: the warning must reach the user
     assert main(["export", str(capture), "-o", str(tmp_path / "a.glb")]) == 2
     assert "no reconstruction yet" in capsys.readouterr().err
     assert main(["reconstruct", str(capture), "--updates", "1"] + FAST) == 0
