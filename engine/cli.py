@@ -173,6 +173,23 @@ def build_parser() -> argparse.ArgumentParser:
     bx.add_argument("--sheet", type=Path, help="picture of the comparison: original (top) and exported (bottom) per view")
     bx.set_defaults(run=_run_bench_export)
 
+    bg = bench_sub.add_parser("suggest", help="seconds to compute next-view suggestions for a capture (target < 1 s)")
+    bg.add_argument("capture", type=Path, help="a capture folder (with or without a reconstruction)")
+    bg.add_argument("--k", type=int, default=4, help="suggestions (default 4)")
+    bg.add_argument("--repeats", type=int, default=3, help="timed runs; the median is reported (default 3)")
+    bg.add_argument("--checkpoint", type=Path, help="the weights the reconstruction was made with (default: as lirm reconstruct)")
+    bg.add_argument("--json", type=Path, help="also write the figures here")
+    bg.set_defaults(run=_run_bench_suggest)
+
+    bt = bench_sub.add_parser("trajectory", help="next views chosen by guidance, at random or sequentially: quality after updates 2 and 3 (held-out synthetic set)")
+    bt.add_argument("checkpoint", type=Path, nargs="?", help="model weights (default: the shipped checkpoint)")
+    bt.add_argument("--objects", type=int, default=4, help="held-out synthetic objects (default 4)")
+    bt.add_argument("--size", type=int, default=64, help="side of the protocol views in pixels (default 64)")
+    bt.add_argument("--output-views", type=int, default=6, help="output views scored per object (default 6 of 12)")
+    bt.add_argument("--mesh-resolution", type=int, default=48, help="marching-cubes grid for guidance and the Chamfer distance (default 48)")
+    bt.add_argument("-o", "--out", type=Path, help="also write the table (.md) and the numbers (.json beside it)")
+    bt.set_defaults(run=_run_bench_trajectory)
+
     bs = bench_sub.add_parser("synth", help="synthetic training views per second, and a contact sheet of them")
     bs.add_argument("--scenes", type=int, default=4, help="scenes to generate (default 4)")
     bs.add_argument("--views", type=int, default=8, help="views per scene (default 8; training uses 32)")
@@ -390,20 +407,17 @@ def _run_export(args: argparse.Namespace) -> int:
 
 
 def _run_suggest(args: argparse.Namespace) -> int:
-    from .guidance.suggest import suggest_for_capture, write_heat_map
+    from .guidance.suggest import suggest_for_capture, write_guidance, write_heat_map
     from lirm.renderer.context import create_headless_context
-    from lirm.renderer.pbr_renderer import PBRRenderer
 
     if args.k < 1:
         raise LirmUserError("--k must be at least 1")
     if not (args.capture / "capture.json").exists():
         raise LirmUserError(f"{args.capture} is not a capture folder (no capture.json); make one with `lirm capture`")
     ctx = create_headless_context()
-    renderer = PBRRenderer(ctx)
     try:
-        result = suggest_for_capture(renderer, args.capture, args.k, args.checkpoint)
+        result = suggest_for_capture(ctx, args.capture, args.k, args.checkpoint)
     finally:
-        renderer.release()
         ctx.release()
     for note in result.notes:
         print(f"note: {note}", file=sys.stderr)
@@ -416,6 +430,107 @@ def _run_suggest(args: argparse.Namespace) -> int:
         print("the surface is covered from every reachable angle: no more views needed")
     heat_path = args.heat_map or args.capture / "guidance" / "heat_map.png"
     print(f"heat map: {write_heat_map(heat_path, result.heat_map, result.suggestions)}")
+    files = write_guidance(args.capture / "guidance", result)
+    print(f"for the app: {files['suggestions']} and {files['coverage']} (per-vertex coverage)")
+    return 0
+
+
+def _run_bench_trajectory(args: argparse.Namespace) -> int:
+    import time
+
+    from .evaluation.evaluate import EvalConfig
+    from .evaluation.heldout_sets import synthetic_heldout
+    from .evaluation.report import comparison_table
+    from .guidance.trajectory_study import TrajectoryConfig, guided_margin, run_trajectory_study
+    from .io.atomic_files import atomic_write, atomic_write_json
+    from .model.pretrained import load_model
+    from lirm.renderer.context import create_headless_context
+    from lirm.renderer.pbr_renderer import PBRRenderer
+
+    for name in ("objects", "size", "output_views", "mesh_resolution"):
+        if getattr(args, name) < 1:
+            raise LirmUserError(f"--{name.replace('_', '-')} must be at least 1")
+    source = load_model(args.checkpoint)
+    if source.warning:
+        print(source.warning, file=sys.stderr)
+    ctx = create_headless_context()
+    renderer = PBRRenderer(ctx)
+    start = time.perf_counter()
+    try:
+        objects = synthetic_heldout(renderer, args.objects, args.size)
+        config = TrajectoryConfig(mesh_resolution=args.mesh_resolution,
+                                  eval=EvalConfig(output_views=args.output_views, mesh_resolution=args.mesh_resolution))
+        bar = _progress_bar(3 * len(objects), "trajectories")
+
+        def progress(message: str, done: int, total: int) -> None:
+            bar.n = done
+            bar.set_description(message)
+            bar.refresh()
+
+        try:
+            results = run_trajectory_study(source.model, objects, ctx, config, progress=progress)
+        finally:
+            bar.close()
+    finally:
+        renderer.release()
+        ctx.release()
+    table = comparison_table([(name, r.scores) for name, r in results.items()], f"Camera trajectories, {source.description}: update 1 = the first 4 views "
+                                                    f"in azimuth order for all; updates 2-3 chosen by each strategy")
+    margin = guided_margin(results, "random")
+    lines = ["", "Share of the true surface seen within 60° by the inputs so far:", "",
+             "| strategy | " + " | ".join(f"after update {u + 1}" for u in range(len(results["guided"].coverage))) + " |",
+             "|---|" + "---|" * len(results["guided"].coverage)]
+    lines += [f"| {name} | " + " | ".join(f"{100 * c:.1f}%" for c in r.coverage) + " |" for name, r in results.items()]
+    lines += ["", "Guided minus random (positive = guided better; CD: random minus guided):", "",
+              "| after update | PSNR | SSIM | albedo PSNR | roughness PSNR | metallic PSNR | CD | coverage |",
+              "|---|---|---|---|---|---|---|---|"]
+    fmt = lambda v, d: "—" if v is None else f"{v:+.{d}f}"  # noqa: E731
+    for m in margin:
+        lines.append(f"| {m['update']} | {fmt(m['psnr'], 2)} | {fmt(m['ssim'], 3)} | {fmt(m['albedo_psnr'], 2)} | "
+                     f"{fmt(m['roughness_psnr'], 2)} | {fmt(m['metallic_psnr'], 2)} | {fmt(m['chamfer'], 4)} | "
+                     f"{fmt(None if m['coverage'] is None else 100 * m['coverage'], 1)} pts |")
+    table += "\n".join(lines) + f"\n\n{time.perf_counter() - start:.0f} s in all.\n"
+    print(table)
+    if args.out:
+        atomic_write(args.out, lambda tmp: tmp.write_text(table, encoding="utf-8"))
+        atomic_write_json(args.out.with_suffix(".json"), {"weights": source.description, "margin_vs_random": margin,
+                                                          **{name: {**r.scores.to_dict(), "coverage": r.coverage} for name, r in results.items()}})
+    return 0
+
+
+def _run_bench_suggest(args: argparse.Namespace) -> int:
+    import statistics
+    import time
+
+    from .guidance.suggest import suggest_for_capture
+    from lirm.renderer.context import create_headless_context
+
+    if not (args.capture / "capture.json").exists():
+        raise LirmUserError(f"{args.capture} is not a capture folder (no capture.json); make one with `lirm capture`")
+    if args.repeats < 1 or args.k < 1:
+        raise LirmUserError("--repeats and --k must be at least 1")
+    start = time.perf_counter()
+    ctx = create_headless_context()
+    context_seconds = time.perf_counter() - start
+    runs = []
+    try:
+        for _ in range(args.repeats):
+            timings: dict[str, float] = {}
+            start = time.perf_counter()
+            result = suggest_for_capture(ctx, args.capture, args.k, args.checkpoint, timings=timings)
+            timings["total"] = time.perf_counter() - start
+            runs.append(timings)
+    finally:
+        ctx.release()
+    median = {name: statistics.median(r.get(name, 0.0) for r in runs) for name in runs[0]}
+    parts = ", ".join(f"{name} {median[name]:.3f}" for name in runs[0] if name != "total")
+    print(f"suggest ({result.surface}, {len(result.vertices)} vertices, {len(result.suggestions)} of k={args.k}): "
+          f"median of {args.repeats}: {median['total']:.3f} s ({parts}); GL context {context_seconds:.2f} s once")
+    if args.json:
+        from .io.atomic_files import atomic_write_json
+
+        atomic_write_json(args.json, {"capture": str(args.capture), "surface": result.surface, "runs": runs,
+                                      "median": median, "context_seconds": context_seconds})
     return 0
 
 

@@ -17,6 +17,7 @@ import torch
 
 from lirm.engine.export.marching_cubes import extract_mesh
 from lirm.engine.metrics import psnr, scaled_albedo_psnr, ssim
+from lirm.engine.model.field import device_of
 from lirm.engine.model.occupancy_grid import OccupancyConfig, OccupancyGrid
 from lirm.engine.model.volume_renderer import VolumeRenderConfig, render_camera
 from lirm.engine.synth.view_crops import crop_like_capture, resize_views
@@ -92,57 +93,73 @@ def _field_mesh_points(field, config: EvalConfig, device) -> np.ndarray:
     return surface_samples(mesh.vertices, mesh.faces, config.chamfer_points, seed=0)
 
 
-@torch.no_grad()
-def evaluate_heldout(model: ProgressiveReconstructor, objects: list[HeldoutObject], config: EvalConfig = EvalConfig(), set_name: str = "synthetic",
-                     progress: Progress | None = None, cancel: Callable[[], bool] | None = None) -> EvalResult:
+def model_device(model) -> torch.device:
     if isinstance(model, torch.nn.Module):
         model.eval()
-        device = next(model.parameters()).device
-    else:
-        device = torch.device("cpu")
-    per_update: dict[int, dict[str, list[float]]] = {u: {} for u in range(1, config.updates + 1)}
+        return next(model.parameters()).device
+    return torch.device("cpu")
+
+
+def model_inputs(model, obj: HeldoutObject, indices, device):
+    """The views at `indices` as the model takes them: cut like capture crops, at its input size."""
+    chosen = obj.views.select(indices)
     size = model.config.image_size
+    inputs = resize_views(chosen, size) if obj.inputs_prepared else crop_like_capture(chosen, size)
+    return inputs.view_batch(device=device)
+
+
+@torch.no_grad()
+def score_field(field_, obj: HeldoutObject, outputs: list[int], config: EvalConfig, scores: dict[str, list[float]],
+                lpips_net=None) -> None:
+    """Render the field from the output views and append each metric to `scores` (the Chamfer distance once)."""
+    device = device_of(field_)
+    step = 2.0 * field_.radius / config.render.samples_per_ray
+    grid = OccupancyGrid.build(field_, field_.radius, config.render.beta, step, config.occupancy)
+    for i in outputs:
+        out = render_camera(field_, obj.views.cameras[i], config.render, grid, device=device)
+        truth = obj.views
+        coverage = truth.mask[i]
+        inside = coverage > 0.99
+        colour = np.clip(out["colour"], 0.0, 1.0)
+        scores.setdefault("psnr", []).append(psnr(colour, truth.image[i]))
+        scores.setdefault("ssim", []).append(ssim(colour, truth.image[i]))
+        if lpips_net is not None:
+            as_tensor = lambda a: torch.from_numpy(np.ascontiguousarray(a)).permute(2, 0, 1)[None].to(device)  # noqa: E731
+            scores.setdefault("lpips", []).append(float(lpips_net(as_tensor(colour), as_tensor(truth.image[i]))))
+        if inside.any() and truth.albedo is not None:
+            denom = np.maximum(coverage, 1e-6)
+            scores.setdefault("albedo", []).append(scaled_albedo_psnr(out["albedo"], truth.albedo[i] / denom[..., None], inside))
+            scores.setdefault("roughness", []).append(psnr(out["roughness"], truth.roughness[i] / denom, inside))
+            scores.setdefault("metallic", []).append(psnr(out["metallic"], truth.metallic[i] / denom, inside))
+    if obj.surface is not None and len(obj.surface):
+        scores.setdefault("chamfer", []).append(chamfer_distance(_field_mesh_points(field_, config, device), obj.surface))
+
+
+def update_scores(update: int, s: dict[str, list[float]]) -> UpdateScores:
+    return UpdateScores(update, _finite_mean(s.get("psnr", [])) or float("nan"), _finite_mean(s.get("ssim", [])) or float("nan"),
+                        _finite_mean(s.get("lpips", [])), _finite_mean(s.get("albedo", [])), _finite_mean(s.get("roughness", [])),
+                        _finite_mean(s.get("metallic", [])), _mean_or_inf(s.get("chamfer")), len(s.get("psnr", [])))
+
+
+@torch.no_grad()
+def evaluate_heldout(model: ProgressiveReconstructor, objects: list[HeldoutObject], config: EvalConfig = EvalConfig(),
+                     set_name: str = "synthetic", progress: Progress | None = None,
+                     cancel: Callable[[], bool] | None = None) -> EvalResult:
+    device = model_device(model)
+    per_update: dict[int, dict[str, list[float]]] = {u: {} for u in range(1, config.updates + 1)}
     ok, why = lpips_available()
     lpips_net = LPIPSLoss().to(device) if ok else None
     for k, obj in enumerate(objects):
         if progress:
             progress(f"evaluating {obj.name}", k, len(objects))
-        sets = obj.protocol.input_sets[:config.updates]
         outputs = obj.protocol.outputs[:config.output_views] if config.output_views else obj.protocol.outputs
         state = model.initial_state(1)
-        for u, input_set in enumerate(sets, start=1):
+        for u, input_set in enumerate(obj.protocol.input_sets[:config.updates], start=1):
             if cancel is not None and cancel():
                 raise KeyboardInterrupt("evaluation cancelled")
-            chosen = obj.views.select(input_set)
-            inputs = resize_views(chosen, size) if obj.inputs_prepared else crop_like_capture(chosen, size)
-            state = model.update(state, inputs.view_batch(device=device))
-            field_ = model.decode(state)
-            step = 2.0 * field_.radius / config.render.samples_per_ray
-            grid = OccupancyGrid.build(field_, field_.radius, config.render.beta, step, config.occupancy)
-            scores = per_update[u]
-            for i in outputs:
-                out = render_camera(field_, obj.views.cameras[i], config.render, grid, device=device)
-                truth = obj.views
-                coverage = truth.mask[i]
-                inside = coverage > 0.99
-                colour = np.clip(out["colour"], 0.0, 1.0)
-                scores.setdefault("psnr", []).append(psnr(colour, truth.image[i]))
-                scores.setdefault("ssim", []).append(ssim(colour, truth.image[i]))
-                if lpips_net is not None:
-                    as_tensor = lambda a: torch.from_numpy(np.ascontiguousarray(a)).permute(2, 0, 1)[None].to(device)  # noqa: E731
-                    scores.setdefault("lpips", []).append(float(lpips_net(as_tensor(colour), as_tensor(truth.image[i]))))
-                if inside.any() and truth.albedo is not None:
-                    denom = np.maximum(coverage, 1e-6)
-                    scores.setdefault("albedo", []).append(scaled_albedo_psnr(out["albedo"], truth.albedo[i] / denom[..., None], inside))
-                    scores.setdefault("roughness", []).append(psnr(out["roughness"], truth.roughness[i] / denom, inside))
-                    scores.setdefault("metallic", []).append(psnr(out["metallic"], truth.metallic[i] / denom, inside))
-            if obj.surface is not None and len(obj.surface):
-                scores.setdefault("chamfer", []).append(chamfer_distance(_field_mesh_points(field_, config, device), obj.surface))
-    rows = [UpdateScores(u, _finite_mean(s.get("psnr", [])) or float("nan"), _finite_mean(s.get("ssim", [])) or float("nan"),
-                         _finite_mean(s.get("lpips", [])),
-                         _finite_mean(s.get("albedo", [])), _finite_mean(s.get("roughness", [])),
-                         _finite_mean(s.get("metallic", [])), _mean_or_inf(s.get("chamfer")), len(s.get("psnr", [])))
-            for u, s in per_update.items() if s]
+            state = model.update(state, model_inputs(model, obj, input_set, device))
+            score_field(model.decode(state), obj, outputs, config, per_update[u], lpips_net)
+    rows = [update_scores(u, s) for u, s in per_update.items() if s]
     return EvalResult(set_name, [o.name for o in objects], rows, "" if ok else f"LPIPS skipped: {why}")
 
 

@@ -43,6 +43,7 @@ class HeldoutObject:
     views: ObjectViews  # all 48 protocol views, full frame
     surface: np.ndarray | None  # (N, 3) points on the true surface, in the field's frame (None: unknown)
     inputs_prepared: bool = False  # the views are already the capture's crops (a real capture)
+    mesh: tuple[np.ndarray, np.ndarray] | None = None  # the true surface as (vertices, faces), when known
 
 
 def _render_object(renderer: PBRRenderer, name: str, model: LoadedModel, environment, rotation_deg: float, turn_deg: float,
@@ -64,8 +65,9 @@ def _render_object(renderer: PBRRenderer, name: str, model: LoadedModel, environ
         vertices.append(p[:, :3])
         faces.append(m.indices.astype(np.int64) + offset)
         offset += len(m.positions)
-    surface = surface_samples(np.concatenate(vertices), np.concatenate(faces), surface_points, seed)
-    return HeldoutObject(name, protocol, views, surface)
+    vertices, faces = np.concatenate(vertices).astype(np.float32), np.concatenate(faces)
+    surface = surface_samples(vertices, faces, surface_points, seed)
+    return HeldoutObject(name, protocol, views, surface, mesh=(vertices, faces))
 
 
 def synthetic_heldout(renderer: PBRRenderer, count: int = 8, size: int = 128, seed: int = 0,

@@ -70,27 +70,39 @@ def describe_move(from_azimuth: float, from_elevation: float, to_azimuth: float,
     return (" and ".join(parts) or "shoot again from about here").capitalize()
 
 
-def suggest_next_views(coverage: SurfaceCoverage, existing: list[Camera], k: int = 4,
-                       weights: np.ndarray | None = None, config: CandidateConfig = CandidateConfig()) -> tuple[list[Suggestion], np.ndarray]:
-    """The next k views (greedy) and every candidate's initial gain as a (elevations, azimuths) heat map."""
+def greedy_views(coverage: SurfaceCoverage, existing: list[Camera], candidates: list[Camera], k: int,
+                 weights: np.ndarray | None = None) -> tuple[list[int], list[float], np.ndarray]:
+    """Indices of the k candidates that add the most weighted coverage, chosen one after the other,
+    their gains (shares of the weighted surface), and every candidate's gain before any choice."""
     weights = np.ones(len(coverage.points)) if weights is None else np.asarray(weights, np.float64)
     total = float(weights.sum()) or 1.0
     covered = coverage.covered(existing) > 0
+    seen = coverage.seen_many(candidates)
+    first = np.array([float(weights[s & ~covered].sum()) / total for s in seen])
+    chosen, gains = [], []
+    for _ in range(k):
+        gain = [float(weights[s & ~covered].sum()) / total if i not in chosen else -1.0 for i, s in enumerate(seen)]
+        best = int(np.argmax(gain)) if gain else -1
+        if best < 0 or gain[best] <= 0:
+            break
+        chosen.append(best)
+        gains.append(gain[best])
+        covered |= seen[best]
+    return chosen, gains, first
+
+
+def suggest_next_views(coverage: SurfaceCoverage, existing: list[Camera], k: int = 4,
+                       weights: np.ndarray | None = None, config: CandidateConfig = CandidateConfig()) -> tuple[list[Suggestion], np.ndarray]:
+    """The next k views (greedy) and every candidate's initial gain as a (elevations, azimuths) heat map."""
     candidates = candidate_cameras(existing, config)
-    seen = [coverage.seen(camera) for _, _, camera in candidates]
-    heat = np.array([float(weights[s & ~covered].sum()) / total for s in seen])
+    chosen, gains, first = greedy_views(coverage, existing, [camera for _, _, camera in candidates], k, weights)
     azimuths = np.arange(0.0, 360.0, config.azimuth_step_deg)
-    heat_map = heat.reshape(len(config.elevations_deg), len(azimuths))
+    heat_map = first.reshape(len(config.elevations_deg), len(azimuths))
     last = camera_angles(existing[-1]) if existing else (0.0, 20.0, 2.5)
     suggestions = []
-    for _ in range(k):
-        gains = [float(weights[s & ~covered].sum()) / total for s in seen]
-        best = int(np.argmax(gains))
-        if gains[best] <= 0:
-            break
+    for best, gain in zip(chosen, gains):
         azimuth, elevation, camera = candidates[best]
-        suggestions.append(Suggestion(azimuth, elevation, camera_angles(camera)[2], (0.0, 0.0, 0.0), gains[best],
+        suggestions.append(Suggestion(azimuth, elevation, camera_angles(camera)[2], (0.0, 0.0, 0.0), gain,
                                       describe_move(last[0], last[1], azimuth, elevation), camera))
-        covered |= seen[best]
         last = (azimuth, elevation)
     return suggestions, heat_map

@@ -8,6 +8,7 @@ unit sphere), with a message saying so. Cameras are the capture's posed views in
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,6 +33,9 @@ class CaptureSuggestions:
     vertex_coverage: np.ndarray  # (V,) cameras seeing each vertex well
     surface: str  # where the surface came from
     notes: list[str]
+    vertices: np.ndarray  # (V, 3) the surface, in the capture's normalised frame
+    faces: np.ndarray  # (F, 3)
+    uncertainty: np.ndarray | None  # (V,) the model's uncertainty in [0, 1], None before a reconstruction
 
 
 def _surface(capture: Capture, checkpoint, grid: int) -> tuple[trimesh.Trimesh, str, list[str], list]:
@@ -56,17 +60,23 @@ def _surface(capture: Capture, checkpoint, grid: int) -> tuple[trimesh.Trimesh, 
     return trimesh.creation.icosphere(3, radius=0.8), "bounding sphere", notes, []
 
 
-def suggest_for_capture(renderer, capture_dir: str | Path, k: int = 4, checkpoint=None, grid: int = 64) -> CaptureSuggestions:
+def suggest_for_capture(renderer, capture_dir: str | Path, k: int = 4, checkpoint=None, grid: int = 64,
+                        timings: dict[str, float] | None = None) -> CaptureSuggestions:
+    """`timings`, when given, receives the seconds of each part (lirm bench suggest)."""
+    clock = _Clock(timings)
     capture = Capture.open(capture_dir)
     cameras = [capture.cameras[f] for f in sorted(capture.cameras)]
     if not cameras:
         raise LirmUserError(f"{capture.root} has no posed views yet: run `lirm capture` on it first")
     mesh, surface, notes, fields = _surface(capture, checkpoint, grid)
-    weights = None
+    clock.lap("surface")
+    weights, uncertainty = None, None
     if fields:
         from .uncertainty import guidance_weights, vertex_uncertainty
 
-        weights = guidance_weights(vertex_uncertainty(fields, mesh.vertices, mesh.vertex_normals)["total"])
+        uncertainty = vertex_uncertainty(fields, mesh.vertices, mesh.vertex_normals)["total"]
+        weights = guidance_weights(uncertainty)
+    clock.lap("uncertainty")
     if len(cameras) == 1:
         notes.append("only one view so far: every suggestion is about getting round the object")
     spread = np.ptp([c.center for c in cameras], axis=0).max() if len(cameras) > 1 else 0.0
@@ -75,12 +85,52 @@ def suggest_for_capture(renderer, capture_dir: str | Path, k: int = 4, checkpoin
     coverage = SurfaceCoverage(renderer, mesh.vertices, mesh.faces, mesh.vertex_normals)
     try:
         vertex_coverage = coverage.covered(cameras)
+        clock.lap("coverage")
         suggestions, heat = suggest_next_views(coverage, cameras, k, weights=weights, config=CandidateConfig())
+        clock.lap("candidates")
         after = coverage.covered(cameras + [s.camera for s in suggestions])
     finally:
         coverage.release()
     return CaptureSuggestions(suggestions, heat, float((vertex_coverage > 0).mean()), float((after > 0).mean()),
-                              vertex_coverage, surface, notes)
+                              vertex_coverage, surface, notes, np.asarray(mesh.vertices, np.float32),
+                              np.asarray(mesh.faces, np.int32), uncertainty)
+
+
+def write_guidance(folder: Path, result: CaptureSuggestions) -> dict[str, Path]:
+    """What the app draws, beside the heat map: suggestions.json (ranked shots with their cameras) and
+    surface_coverage.npz (the surface with per-vertex camera counts and uncertainty)."""
+    from lirm.engine.io.atomic_files import atomic_write, atomic_write_json
+
+    folder = Path(folder)
+    suggestions = [{"rank": n, "azimuth_deg": s.azimuth_deg, "elevation_deg": s.elevation_deg, "distance": s.distance,
+                    "look_at": list(s.look_at), "gain": s.gain, "sentence": s.sentence, "camera": s.camera.to_dict()}
+                   for n, s in enumerate(result.suggestions, start=1)]
+    json_path = atomic_write_json(folder / "suggestions.json", {
+        "surface": result.surface, "coverage_now": result.coverage_before, "coverage_after": result.coverage_after,
+        "notes": result.notes, "suggestions": suggestions,
+        "frame": "the capture's normalised frame (object in the unit sphere, +Z up); cameras as in transforms.json"})
+    arrays = {"vertices": result.vertices, "faces": result.faces, "cameras_seeing": result.vertex_coverage.astype(np.int32)}
+    if result.uncertainty is not None:
+        arrays["uncertainty"] = result.uncertainty.astype(np.float32)
+
+    def save(tmp: Path) -> None:
+        with open(tmp, "wb") as f:
+            np.savez_compressed(f, **arrays)
+
+    npz_path = atomic_write(folder / "surface_coverage.npz", save)
+    return {"suggestions": json_path, "coverage": npz_path}
+
+
+class _Clock:
+    def __init__(self, timings: dict[str, float] | None):
+        self.timings = timings
+        self.last = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        now = time.perf_counter()
+        if self.timings is not None:
+            self.timings[name] = self.timings.get(name, 0.0) + now - self.last
+        self.last = now
 
 
 def write_heat_map(path: Path, heat: np.ndarray, suggestions: list[Suggestion], config: CandidateConfig = CandidateConfig()) -> Path:
