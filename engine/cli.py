@@ -646,13 +646,24 @@ def _run_eval(args: argparse.Namespace) -> int:
         table = markdown_table(results[0][1], f"{label}: '{model.config.name}' model")
     else:
         table = comparison_table(results, f"'{model.config.name}' model against the baselines")
+    sensitivity = {}
+    if len(objects) > 1 and all(o.surface is not None for o in objects):
+        from .evaluation.input_sensitivity import input_sensitivity
+
+        lines = ["", "Input sensitivity (prediction at an object's surface from its own first views vs another object's; "
+                     "about 0 = the inputs are ignored):", "", "| reconstructor | albedo Δ | SDF Δ |", "|---|---|---|"]
+        for name, reconstructor in contenders:
+            s = input_sensitivity(reconstructor, objects)
+            sensitivity[name] = {"albedo": s.albedo, "sdf": s.sdf, "pairs": s.pairs}
+            lines.append(f"| {name} | {s.albedo:.4f} | {s.sdf:.4f} |")
+        table += "\n".join(lines) + "\n"
     print(table)
     if args.out:
         atomic_write(args.out, lambda tmp: tmp.write_text(table, encoding="utf-8"))
         atomic_write_json(args.out.with_suffix(".json"), {
             "checkpoint": str(args.checkpoint) if args.checkpoint else source.description,
             **results[0][1].to_dict(),
-            "baselines": {name: result.to_dict() for name, result in results[1:]}})
+            "baselines": {name: result.to_dict() for name, result in results[1:]}, "input_sensitivity": sensitivity})
     return 0
 
 

@@ -22,7 +22,6 @@ class LIRMConfig:
     # Images: non-overlapping patch x patch tokens of [masked RGB, background RGB, Plücker 6] = 12 channels.
     image_size: int = 256
     patch: int = 8
-    token_norm: bool = False  # LayerNorm on the image tokens after the linear tokeniser (see tokenizer.py)
     # Planes: "hexa" (6 planes, one per half space) or "tri" (the ablation, 3 planes).
     planes: str = "hexa"
     plane_tokens: int = 16  # tokens per plane side; each decodes to a plane_patch^2 feature patch

@@ -20,7 +20,6 @@ class ImageTokenizer(nn.Module):
             # network learns to use the surroundings without their first disturbing the object.
             w = self.proj.weight.view(config.width, INPUT_CHANNELS, config.patch, config.patch)
             w[:, 3:6] = 0.0
-        self.norm = nn.LayerNorm(config.width) if config.token_norm else None
 
     def forward(self, image: torch.Tensor, image_bg: torch.Tensor, plucker: torch.Tensor) -> torch.Tensor:
         """(B, V, 3, H, W), (B, V, 3, H, W), (B, V, 6, H, W) -> (B, V * H/p * W/p, width)."""
@@ -28,5 +27,4 @@ class ImageTokenizer(nn.Module):
         b, v, c, h, w = x.shape
         p = self.patch
         x = x.reshape(b, v, c, h // p, p, w // p, p).permute(0, 1, 3, 5, 2, 4, 6)
-        tokens = self.proj(x.reshape(b, v * (h // p) * (w // p), c * p * p))
-        return tokens if self.norm is None else self.norm(tokens)
+        return self.proj(x.reshape(b, v * (h // p) * (w // p), c * p * p))

@@ -84,3 +84,30 @@ def test_baselines_go_through_the_same_evaluation(renderer):
     for row in sphere.rows:
         # The sphere is fitted to the object's silhouettes, so its surface is near the true one.
         assert 5 < row.psnr < 40 and row.chamfer is not None and row.chamfer < 0.3
+
+
+def test_input_sensitivity_tells_a_reader_of_inputs_from_a_prior(renderer):
+    from lirm.engine.evaluation.input_sensitivity import input_sensitivity
+
+    objects = synthetic_heldout(renderer, 2, 32, surface_points=300)
+    sphere = input_sensitivity(MeanColourSphere(32), objects)
+    assert sphere.pairs == 2 and sphere.albedo > 0.01 and sphere.sdf > 0.001  # colour and size follow the views
+
+    class Prior:
+        """Shows the same sphere whatever it is shown."""
+
+        config = MeanColourSphere(32).config
+
+        def initial_state(self, batch=1):
+            return None
+
+        def update(self, state, views):
+            return None
+
+        def decode(self, state):
+            from lirm.engine.evaluation.baselines import SphereField
+
+            return SphereField(0.5, torch.tensor([0.5, 0.4, 0.3]))
+
+    prior = input_sensitivity(Prior(), objects)
+    assert prior.albedo == 0 and prior.sdf == 0
