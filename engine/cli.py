@@ -81,6 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument("--novel-views", type=int, default=4, help="orbit views rendered after each update (default 4)")
     rec.add_argument("--render-size", type=int, default=128, help="side of those renders in pixels (default 128)")
     rec.add_argument("--grid-resolution", type=int, default=128, help="occupancy grid voxels per side for those renders (default 128; the paper uses 250)")
+    rec.add_argument("--frames", help="instead of all updates: ONE more update with these frames (comma-separated ids), on top of the latest")
+    rec.add_argument("--after", type=int, help="with --frames: on top of this update instead (0 = afresh); later updates are set aside, not deleted")
     rec.set_defaults(run=_run_reconstruct)
 
     ex = sub.add_parser("export", help="the capture's latest reconstruction as a textured PBR .glb")
@@ -369,7 +371,15 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
         bar.refresh()
 
     try:
-        result = run_reconstruction(args.capture, source, config, progress=progress)
+        if args.frames:
+            from .reconstruction.session import run_next_update
+
+            frames = [f.strip() for f in args.frames.split(",") if f.strip()]
+            result = run_next_update(args.capture, source, frames, args.after, config)
+        else:
+            if args.after is not None:
+                raise LirmUserError("--after goes with --frames (the views of the one update to run)")
+            result = run_reconstruction(args.capture, source, config, progress=progress)
     finally:
         bar.close()
     print(f"weights: {source.description}" + ("" if source.trained else "  (UNTRAINED)"))

@@ -74,55 +74,130 @@ def update_sets(frame_ids: list[str], views_per_update: int, updates: int | None
 
 def run_reconstruction(capture_dir: str | Path, source: ModelSource, config: ReconstructConfig = ReconstructConfig(),
                        progress: Progress | None = None, cancel: Callable[[], bool] | None = None) -> ReconstructResult:
+    """All updates from scratch, the prepared views in frame order in sets of `views_per_update`."""
     capture = Capture.open(capture_dir)
-    views = {fid: capture.read_prepared(fid) for fid in sorted(capture.cameras)}
-    views = {fid: v for fid, v in views.items() if v is not None}
-    if not views:
-        raise LirmUserError(f"{capture.root} has no prepared views: run `lirm capture` on it first (or --resume it)")
+    views = _prepared_views(capture)
     sets = update_sets(list(views), config.views_per_update, config.updates)
-    model = source.model
-    device = next(model.parameters()).device
-    cameras = novel_view_cameras(list(capture.cameras.values()), config.novel_views, config.render_size)
-    out_dir = capture.root / "reconstruction"
-    records: list[UpdateRecord] = []
-    state = model.initial_state(1)
-    capture.updates = []
+    _set_aside_updates_after(capture, 0)
+    session = _Session(capture, source, config)
+    state = source.model.initial_state(1)
     for number, frames in enumerate(sets, start=1):
         if cancel is not None and cancel():
             break
         if progress:
             progress("update", number - 1, len(sets))
-        batch = view_batch([views[f] for f in frames], model.config.image_size, device)
+        state = session.apply(state, number, frames, views)
+        if progress:
+            progress("update", number, len(sets))
+    return ReconstructResult(session.out_dir, session.records, source.trained)
+
+
+def run_next_update(capture_dir: str | Path, source: ModelSource, frames: list[str], after_update: int | None = None,
+                    config: ReconstructConfig = ReconstructConfig()) -> ReconstructResult:
+    """One more update with the chosen frames, on top of update `after_update` (default: the latest;
+    0 starts afresh). Updates after it are set aside under reconstruction/set_aside/, never deleted:
+    that is stepping back in the history and going on from there."""
+    from lirm.engine.model.state_file import load_state
+
+    capture = Capture.open(capture_dir)
+    views = _prepared_views(capture)
+    unknown = [f for f in frames if f not in views]
+    if not frames or unknown:
+        raise LirmUserError(f"{capture.root}: {'no frames chosen' if not frames else 'no prepared view for ' + ', '.join(unknown)}; "
+                            f"choose among: {', '.join(views)}")
+    done = len(capture.updates)
+    after = done if after_update is None else after_update
+    if not 0 <= after <= done:
+        raise LirmUserError(f"{capture.root} has {done} updates; cannot continue after update {after}")
+    model = source.model
+    if after == 0:
+        state = model.initial_state(1)
+    else:
+        state = load_state(capture.root / capture.updates[after - 1]["state"], device=str(next(model.parameters()).device))
+        if state.signature != model.config.signature():
+            raise LirmUserError(f"update {after} of {capture.root} was made with other weights ({capture.updates[after - 1].get('weights')}); "
+                                f"pass the same --checkpoint, or start afresh with --after 0")
+    _set_aside_updates_after(capture, after)
+    session = _Session(capture, source, config)
+    session.apply(state, after + 1, list(frames), views)
+    return ReconstructResult(session.out_dir, session.records, source.trained)
+
+
+def _prepared_views(capture: Capture) -> dict:
+    views = {fid: capture.read_prepared(fid) for fid in sorted(capture.cameras)}
+    views = {fid: v for fid, v in views.items() if v is not None}
+    if not views:
+        raise LirmUserError(f"{capture.root} has no prepared views: run `lirm capture` on it first (or --resume it)")
+    return views
+
+
+def _set_aside_updates_after(capture: Capture, keep: int) -> None:
+    """Move the folders of updates after `keep` to reconstruction/set_aside/<time>/ and forget them."""
+    later = capture.updates[keep:]
+    if not later:
+        return
+    import shutil
+
+    aside = capture.root / "reconstruction" / "set_aside" / time.strftime("%Y%m%d-%H%M%S")
+    for entry in later:
+        folder = (capture.root / entry["state"]).parent
+        if folder.is_dir():
+            aside.mkdir(parents=True, exist_ok=True)
+            shutil.move(str(folder), str(aside / folder.name))
+    capture.log("reconstruct", set_aside=[e["update"] for e in later], to=str(aside.relative_to(capture.root)))
+    capture.updates = capture.updates[:keep]
+    capture.save()
+
+
+class _Session:
+    """Applies updates to a capture's reconstruction: state, novel-view pictures, history, summary."""
+
+    def __init__(self, capture: Capture, source: ModelSource, config: ReconstructConfig):
+        self.capture, self.source, self.config = capture, source, config
+        self.model = source.model
+        self.device = next(self.model.parameters()).device
+        self.cameras = novel_view_cameras(list(capture.cameras.values()), config.novel_views, config.render_size)
+        self.out_dir = capture.root / "reconstruction"
+        self.records: list[UpdateRecord] = []
+
+    def apply(self, state, number: int, frames: list[str], views: dict):
+        model, config, capture = self.model, self.config, self.capture
+        batch = view_batch([views[f] for f in frames], model.config.image_size, self.device)
         start = time.perf_counter()
         with torch.inference_mode():
             state = model.update(state, batch)
             field = model.decode(state)
         seconds = time.perf_counter() - start
-        update_dir = out_dir / f"update_{number:02d}"
+        update_dir = self.out_dir / f"update_{number:02d}"
         save_state(state, update_dir / "state.safetensors")
         start = time.perf_counter()
         with torch.inference_mode():
             grid = OccupancyGrid.build(field, model.config.radius, config.render.beta,
                                        2.0 * model.config.radius / config.render.samples_per_ray, config.occupancy)
             skipped = []
-            for k, camera in enumerate(cameras):
-                images = render_camera(field, camera, config.render, grid, device)
+            for k, camera in enumerate(self.cameras):
+                images = render_camera(field, camera, config.render, grid, self.device)
                 _write_maps(update_dir, k, images.maps)
                 skipped.append(images.stats.skipped_fraction)
         record = UpdateRecord(number, frames, seconds, time.perf_counter() - start, grid.occupied_fraction,
                               float(np.mean(skipped)), str(update_dir.relative_to(capture.root)))
-        records.append(record)
+        self.records.append(record)
         capture.updates.append({"update": number, "frames": frames, "seconds": round(seconds, 3),
-                                "weights": source.description, "trained": source.trained, "state": f"{record.out_dir}/state.safetensors"})
-        capture.log("reconstruct", update=number, frames=frames, weights=source.description)
+                                "weights": self.source.description, "trained": self.source.trained,
+                                "state": f"{record.out_dir}/state.safetensors"})
+        capture.log("reconstruct", update=number, frames=frames, weights=self.source.description)
         capture.save()
-        atomic_write_json(out_dir / "summary.json", {
-            "weights": source.description, "trained": source.trained, "warning": source.warning,
-            "preset": model.config.name, "config": asdict(config), "updates": [asdict(r) for r in records],
+        summary_path = self.out_dir / "summary.json"
+        earlier = []
+        if summary_path.is_file() and number > 1:
+            import json
+
+            earlier = [u for u in json.loads(summary_path.read_text()).get("updates", []) if u["update"] < number]
+        atomic_write_json(summary_path, {
+            "weights": self.source.description, "trained": self.source.trained, "warning": self.source.warning,
+            "preset": model.config.name, "config": asdict(config), "updates": earlier + [asdict(record)],
         })
-        if progress:
-            progress("update", number, len(sets))
-    return ReconstructResult(out_dir, records, source.trained)
+        return state
 
 
 def _write_maps(folder: Path, index: int, maps: dict[str, np.ndarray]) -> None:

@@ -108,3 +108,28 @@ def test_export_writes_a_valid_glb_of_the_latest_update(lego_capture, tmp_path, 
     assert "UNTRAINED" in captured.err and "faces" in captured.out
     report = validate_gltf(out)
     assert report.errors == 0, report.messages
+
+
+def test_one_more_update_on_chosen_frames_and_stepping_back(lego_capture, tmp_path, capsys):
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    frames = sorted(Capture.open(capture).cameras)
+    assert main(["reconstruct", str(capture), "--frames", ",".join(frames[:3])] + FAST) == 0
+    assert main(["reconstruct", str(capture), "--frames", frames[5]] + FAST) == 0
+    updates = Capture.open(capture).updates
+    assert [u["frames"] for u in updates] == [frames[:3], [frames[5]]]
+    second = load_state(capture / updates[1]["state"])
+    assert second.updates == 2
+    # Step back to update 1 and go on with other views: update 2 is set aside, not lost.
+    assert main(["reconstruct", str(capture), "--frames", frames[6], "--after", "1"] + FAST) == 0
+    updates = Capture.open(capture).updates
+    assert [u["frames"] for u in updates] == [frames[:3], [frames[6]]]
+    aside = list((capture / "reconstruction" / "set_aside").glob("*/update_02/state.safetensors"))
+    assert len(aside) == 1 and torch.equal(load_state(aside[0]).plane_tokens, second.plane_tokens)
+    summary = json.loads((capture / "reconstruction" / "summary.json").read_text())
+    assert [u["frames"] for u in summary["updates"]] == [frames[:3], [frames[6]]]
+    capsys.readouterr()
+    assert main(["reconstruct", str(capture), "--frames", "nope"] + FAST) == 2
+    assert "no prepared view for nope" in capsys.readouterr().err
+    assert main(["reconstruct", str(capture), "--frames", frames[0], "--after", "7"] + FAST) == 2
+    assert "cannot continue after update 7" in capsys.readouterr().err
