@@ -10,6 +10,7 @@ from pathlib import Path
 
 from lirm.renderer.context import GLContextError
 
+from . import progress_events
 from .errors import LirmUserError
 
 
@@ -32,8 +33,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="store_true", help="more logging")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
 
+    ap = sub.add_parser("app", help="the desktop app: capture, progressive reconstruction, relighting, guidance and export in one window")
+    ap.add_argument("capture", type=Path, nargs="?", help="a capture folder to open (default: an empty project)")
+    ap.add_argument("--demo", action="store_true", help="open the built-in demo capture (made once in the background)")
+    ap.add_argument("--size", type=_size, default=(1280, 800), help="window size WxH (default 1280x800)")
+    ap.add_argument("--checkpoint", type=Path, help="model weights (default: the shipped checkpoint)")
+    ap.add_argument("--hdri", action="append", default=[], help="an .hdr/.exr offered in the Lighting panel; repeatable")
+    ap.add_argument("--script", type=Path, help="a JSON list of steps to run in the window (tests, recorded sessions)")
+    ap.set_defaults(run=_run_app)
+
     demo = sub.add_parser("demo", help="run the main job on built-in data: render, photograph and capture a built-in object")
     demo.add_argument("-o", "--out", type=Path, default=Path("demo_output"), help="output folder (default: ./demo_output)")
+    demo.add_argument("--capture-only", action="store_true", help="stop once the capture is made (no reconstruction or export)")
     demo.set_defaults(run=_run_demo)
 
     render = sub.add_parser("render", help="render an asset from an orbit of cameras: beauty + G-buffer PNGs + transforms.json")
@@ -94,6 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("--checkpoint", type=Path, help="the weights the reconstruction was made with (default: as lirm reconstruct)")
     ex.add_argument("--no-normal-map", action="store_true", help="leave out the tangent-space normal map")
     ex.add_argument("--obj", action="store_true", help="also write NAME.obj + NAME.mtl + PNG textures beside the .glb")
+    ex.add_argument("--update", type=int, help="export the state after this update (default: the latest)")
     ex.set_defaults(run=_run_export)
 
     sg = sub.add_parser("suggest", help="where to shoot next: ranked views, a sentence each, and a view-sphere heat map")
@@ -300,6 +312,7 @@ def _run_capture(args: argparse.Namespace) -> int:
     def progress(stage: str, done: int, total: int) -> None:
         from tqdm import tqdm
 
+        progress_events.emit(stage, done, total)
         bar = bars.get(stage)
         if bar is None:
             for other in bars.values():
@@ -366,6 +379,7 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
     bar = tqdm(desc="LIRM updates", unit="update", file=sys.stderr, disable=None)
 
     def progress(stage: str, done: int, total: int) -> None:
+        progress_events.emit(stage, done, total)
         bar.total = total
         bar.n = done
         bar.refresh()
@@ -375,7 +389,9 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
             from .reconstruction.session import run_next_update
 
             frames = [f.strip() for f in args.frames.split(",") if f.strip()]
+            progress("update", 0, 1)
             result = run_next_update(args.capture, source, frames, args.after, config)
+            progress("update", 1, 1)
         else:
             if args.after is not None:
                 raise LirmUserError("--after goes with --frames (the views of the one update to run)")
@@ -394,6 +410,11 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
     return 0
 
 
+def _export_progress(stage: str, done: int, total: int) -> None:
+    progress_events.emit(stage, done, total)
+    print(f"[{done}/{total}] {stage}", file=sys.stderr)
+
+
 def _run_export(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
@@ -408,7 +429,7 @@ def _run_export(args: argparse.Namespace) -> int:
     config = ExportConfig(mesh=replace(MeshExtractionConfig(), resolution=args.grid, face_budget=args.faces),
                           texture_size=args.texture, normal_map=not args.no_normal_map, obj=args.obj)
     result, source = export_capture(args.capture, args.out, config, args.checkpoint,
-                                    progress=lambda stage, done, total: print(f"[{done}/{total}] {stage}", file=sys.stderr))
+                                    progress=_export_progress, update=args.update)
     if not source.trained:
         print(f"WARNING: exported from UNTRAINED weights ({source.description}): the asset does not look like the object", file=sys.stderr)
     timings = ", ".join(f"{k} {v:.1f} s" for k, v in result.seconds.items())
@@ -711,10 +732,29 @@ def _heldout_objects(args: argparse.Namespace):
         ctx.release()
 
 
+def _run_app(args: argparse.Namespace) -> int:
+    import os
+
+    if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+        raise LirmUserError("no display: `lirm app` needs a desktop session (or run it under xvfb-run); "
+                            "`lirm demo` runs the whole flow without a window")
+    from lirm.app.window import AppConfig, run_app
+
+    config = AppConfig(capture=args.capture, demo=args.demo, width=args.size[0], height=args.size[1], checkpoint=args.checkpoint,
+                       script=args.script, extra_environments=tuple(args.hdri))
+    run_app(config)
+    return 0
+
+
 def _run_demo(args: argparse.Namespace) -> int:
     from .demo import run_demo
 
-    result = run_demo(args.out, progress=lambda message: print(message, file=sys.stderr))
+    from dataclasses import replace
+
+    from .demo import DemoConfig
+
+    config = replace(DemoConfig(), capture_only=args.capture_only)
+    result = run_demo(args.out, config, progress=lambda message: progress_events.emit(message, 0, 0) or print(message, file=sys.stderr))
     print(f"demo output is in {result.out_dir.resolve()}/")
     print(f"  overview of every built-in object under every built-in environment: {result.overview}")
     print(f"  synthetic photos: {result.photos}/ (true cameras and masks in {result.out_dir / 'truth'}/)")
@@ -728,6 +768,8 @@ def _run_demo(args: argparse.Namespace) -> int:
     print()
     if "mask_iou_mean" in a:
         print(f"  automatic masks against the truth: IoU mean {a['mask_iou_mean']:.3f}, worst {a['mask_iou_min']:.3f}")
+    if args.capture_only:
+        return 0
     print(f"  reconstruction: {result.capture / 'reconstruction'}/ (weights: {result.weights})")
     print(f"  exported asset: {result.asset}")
     if result.relit:

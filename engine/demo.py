@@ -39,6 +39,7 @@ class DemoConfig:
     shoot: SyntheticCaptureConfig = field(default_factory=SyntheticCaptureConfig)
     shoot_environment: str = "sky"
     relight_environments: tuple[str, ...] = ("studio", "overcast")  # not the shoot's: relighting, not replay
+    capture_only: bool = False  # stop after the capture (the app's demo capture; it reconstructs on its own)
     preset: str | None = None  # the model preset; None: the shipped checkpoint's (untrained small when none ships)
     export_grid: int = 128
     export_faces: int = 20_000
@@ -91,6 +92,8 @@ def run_demo(out_dir: str | Path, config: DemoConfig = DemoConfig(), progress: C
     summary = run_capture(photos, capture_dir, progress=lambda stage, done, total: None)
     accuracy = capture_accuracy(summary.capture, shoot.cameras, {f"shot_{k}": m for k, m in shoot.masks.items()})
     accuracy["registered"] = f"{summary.registered}/{len(shoot.images)}"
+    if config.capture_only:
+        return DemoResult(out_dir, overview, photos, capture_dir, accuracy)
     asset, source = _reconstruct_and_export(capture_dir, out_dir / "asset.glb", config, say)
     say(f"relighting the asset beside the original under {' and '.join(config.relight_environments)}")
     relit, rows = _relight(asset, out_dir / "relit.png", config)

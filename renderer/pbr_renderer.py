@@ -27,6 +27,7 @@ from .shader_source import shader_source
 from .tonemap import TONEMAPPERS
 
 GBUFFER_ATTACHMENTS = ("radiance", "albedo", "material", "normal_depth", "uv")
+DISPLAY_CHANNELS = ("beauty", "albedo", "roughness", "metallic", "normal")  # what a viewport can show
 
 
 @dataclass
@@ -81,6 +82,8 @@ class PBRRenderer:
         self.tonemap_program = ctx.program(vertex_shader=shader_source("fullscreen.vert"), fragment_shader=shader_source("tonemap.frag"))
         self._fullscreen = ctx.vertex_array(self.background_program, [])
         self._fullscreen_tonemap = ctx.vertex_array(self.tonemap_program, [])
+        self.channel_program = ctx.program(vertex_shader=shader_source("fullscreen.vert"), fragment_shader=shader_source("channel_view.frag"))
+        self._fullscreen_channel = ctx.vertex_array(self.channel_program, [])
         self.baker = IBLBaker(ctx, ibl_config)
         self._targets: dict[tuple[int, int], _GBuffer] = {}
 
@@ -113,6 +116,26 @@ class PBRRenderer:
         target = self._target(int(camera.width), int(camera.height))
         self._draw_gbuffer(target, scene, camera, lighting, settings)
         self._tonemap(target.texture("radiance"), framebuffer, settings)
+
+    def draw_channel_to_framebuffer(self, framebuffer: moderngl.Framebuffer, scene: GpuScene, camera, lighting: Lighting,
+                                    channel: str, settings: RenderSettings = RenderSettings(),
+                                    empty: tuple[float, float, float] = (0.18, 0.18, 0.18)) -> None:
+        """One of DISPLAY_CHANNELS into an existing framebuffer of the camera's size: "beauty" as
+        draw_to_framebuffer, or a G-buffer channel shown as an image (albedo in sRGB, scalars as grey)."""
+        if channel == "beauty":
+            return self.draw_to_framebuffer(framebuffer, scene, camera, lighting, settings)
+        if channel not in DISPLAY_CHANNELS:
+            raise ValueError(f"unknown channel {channel!r}; choose one of {', '.join(DISPLAY_CHANNELS)}")
+        target = self._target(int(camera.width), int(camera.height))
+        self._draw_gbuffer(target, scene, camera, lighting, settings)
+        framebuffer.use()
+        prog = self.channel_program
+        for unit, name in enumerate(("albedo", "material", "normal_depth")):
+            target.texture(name).use(unit)
+            _set(prog, f"u_{name}", unit)
+        _set(prog, "u_channel", DISPLAY_CHANNELS.index(channel) - 1)
+        _set(prog, "u_empty", tuple(float(x) for x in empty))
+        self._fullscreen_channel.render(moderngl.TRIANGLES, vertices=3)
 
     # ---- passes ------------------------------------------------------------------------------
     def _draw_gbuffer(self, target: "_GBuffer", scene: GpuScene, camera, lighting: Lighting, settings: RenderSettings) -> None:
@@ -203,7 +226,8 @@ class PBRRenderer:
             target.release()
         self._targets = {}
         self.baker.release()
-        for obj in (self._fullscreen, self._fullscreen_tonemap, self.mesh_program, self.background_program, self.tonemap_program):
+        for obj in (self._fullscreen, self._fullscreen_tonemap, self._fullscreen_channel, self.mesh_program,
+                    self.background_program, self.tonemap_program, self.channel_program):
             obj.release()
 
 

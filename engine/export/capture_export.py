@@ -29,10 +29,15 @@ def reconstruction_model(capture: Capture, checkpoint: str | Path | None = None)
     return load_model(checkpoint, preset)
 
 
-def latest_state_path(capture: Capture) -> Path:
+def latest_state_path(capture: Capture, update: int | None = None) -> Path:
+    """The state after `update` (1-based; default the latest)."""
     if not capture.updates:
         raise LirmUserError(f"{capture.root} has no reconstruction yet: run `lirm reconstruct {capture.root}` first")
-    return capture.root / capture.updates[-1]["state"]
+    if update is None:
+        return capture.root / capture.updates[-1]["state"]
+    if not 1 <= update <= len(capture.updates):
+        raise LirmUserError(f"{capture.root} has updates 1..{len(capture.updates)}, not {update}")
+    return capture.root / capture.updates[update - 1]["state"]
 
 
 def export_transform(capture: Capture) -> np.ndarray:
@@ -50,10 +55,11 @@ def export_transform(capture: Capture) -> np.ndarray:
 
 def export_capture(capture_dir: str | Path, out_path: str | Path, config: ExportConfig = ExportConfig(),
                    checkpoint: str | Path | None = None, progress: Progress | None = None,
-                   source: ModelSource | None = None) -> tuple[ExportResult, ModelSource]:
-    """`source`: the model already loaded by the caller (else reconstruction_model's choice)."""
+                   source: ModelSource | None = None, update: int | None = None) -> tuple[ExportResult, ModelSource]:
+    """`source`: the model already loaded by the caller (else reconstruction_model's choice); `update`:
+    the state after that update instead of the latest."""
     capture = Capture.open(capture_dir)
-    state_path = latest_state_path(capture)
+    state_path = latest_state_path(capture, update)
     source = source or reconstruction_model(capture, checkpoint)
     state = load_state(state_path)
     field = source.model.decode(state)  # a state of another architecture is refused here, by name

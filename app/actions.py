@@ -1,0 +1,339 @@
+"""The app's action layer: every user action as a method, used by the panels (buttons, menus) and by
+the GUI tests and scripts alike, so what a test drives is what a click does.
+
+Long actions start `lirm` jobs (jobs.py) and update the state when they finish; short ones change
+the state at once. Nothing here draws.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from lirm.engine.capture.capture_folder import Capture
+from lirm.engine.errors import LirmUserError
+
+from .app_state import AppState, FrameInfo
+from .jobs import Job, JobRunner
+
+PREVIEW_FACES = 5000  # the viewport's asset after each update: small enough to export in seconds
+PREVIEW_TEXTURE = 256
+PREVIEW_GRID = 96
+VIEWS_PER_UPDATE = 4  # when no views are picked, the next update takes the next unused ones
+DEMO_CAPTURE_ENV = "LIRM_DEMO_CAPTURE"
+
+
+class AppActions:
+    def __init__(self, state: AppState, jobs: JobRunner, checkpoint: Path | None = None):
+        self.state = state
+        self.jobs = jobs
+        self.checkpoint = checkpoint
+        self.listeners: list = []  # callables(event: str) told about changes the viewport must follow
+
+    def _notify(self, event: str) -> None:
+        for listener in self.listeners:
+            listener(event)
+
+    def _ckpt(self) -> list[str]:
+        return ["--checkpoint", str(self.checkpoint)] if self.checkpoint else []
+
+    # ---- the project ---------------------------------------------------------------------------
+    def open_capture(self, path: str | Path) -> bool:
+        path = Path(path).expanduser()
+        try:
+            capture = Capture.open(path)
+        except (LirmUserError, OSError, ValueError) as err:
+            self.state.say(f"cannot open {path}: {err}. Open a folder made by `lirm capture` or import photos.", "error")
+            return False
+        self.state.capture_dir = capture.root
+        self.state.guidance, self.state.coverage = None, None
+        self.state.load_choices()
+        self._read_capture(capture)
+        self._load_guidance()
+        self.state.say(f"opened {capture.root}: {len(capture.cameras)} posed views, {len(capture.updates)} updates")
+        self._show_update(self.state.viewing_update)
+        self._notify("capture")
+        return True
+
+    def refresh(self) -> None:
+        if self.state.capture_dir is not None:
+            self._read_capture(Capture.open(self.state.capture_dir))
+
+    def _read_capture(self, capture: Capture) -> None:
+        frames = []
+        for fid in sorted(capture.frames):
+            f = capture.frames[fid]
+            frames.append(FrameInfo(fid, f.record.original.name, fid in capture.cameras, f.pose_status, f.mask_status,
+                                    capture.prepared_path(fid).is_file(), f.update))
+        self.state.frames = frames
+        self.state.updates = list(capture.updates)
+        self.state.weights = capture.updates[-1].get("weights", "") if capture.updates else ""
+        known = {f.frame_id for f in frames if f.prepared}
+        self.state.choices.selected = [f for f in self.state.choices.selected if f in known]
+
+    def import_photos(self, inputs: str | Path, new_capture: str | Path | None = None) -> Job | None:
+        """A folder of photos or a video: a new capture (at `new_capture`, default beside the photos),
+        or added to the open one."""
+        inputs = str(inputs)
+        if self.state.capture_dir is not None and new_capture is None:
+            args = ["capture", inputs, str(self.state.capture_dir), "--add"]
+            target = self.state.capture_dir
+        else:
+            target = Path(new_capture) if new_capture else Path(inputs).with_name(Path(inputs).stem + "_capture")
+            args = ["capture", inputs, "-o", str(target)]
+
+        def done(job: Job) -> None:
+            if job.state == "finished":
+                self.open_capture(target)
+            elif job.state == "failed":
+                self.state.say(f"importing {inputs} failed: {job.error_text()}", "error")
+            else:
+                self.state.say(f"importing {inputs} was cancelled; `lirm capture {target} --resume` finishes it")
+        return self._start("capture", f"posing and masking {Path(inputs).name}", args, done)
+
+    def open_demo_capture(self, folder: str | Path | None = None) -> Job | None:
+        """The built-in demo capture (the mug of `lirm demo`), made once and reused."""
+        import os
+
+        folder = Path(folder or os.environ.get(DEMO_CAPTURE_ENV) or Path.home() / ".cache" / "lirm" / "demo")
+        capture = folder / "capture"
+        if (capture / "capture.json").is_file() and Capture.open(capture).cameras:
+            self.open_capture(capture)
+            return None
+
+        def done(job: Job) -> None:
+            if job.state == "finished":
+                self.open_capture(capture)
+            else:
+                self.state.say(f"making the demo capture failed: {job.error_text()}", "error")
+        return self._start("capture", "making the demo capture (photos of a mug, posed by COLMAP)",
+                           ["demo", "-o", str(folder), "--capture-only"], done)
+
+    # ---- views ---------------------------------------------------------------------------------
+    def select_views(self, frame_ids: list[str]) -> None:
+        known = {f.frame_id for f in self.state.frames if f.prepared}
+        self.state.choices.selected = [f for f in frame_ids if f in known]
+        self.state.save_choices()
+
+    def toggle_view(self, frame_id: str) -> None:
+        chosen = self.state.choices.selected
+        self.select_views([f for f in chosen if f != frame_id] if frame_id in chosen else chosen + [frame_id])
+
+    def next_views(self) -> list[str]:
+        """The views the next update will take: the picked ones, else the next unused ones."""
+        if self.state.choices.selected:
+            return list(self.state.choices.selected)
+        used = {f for u in self.state.updates[:self.state.viewing_update] for f in u["frames"]}
+        return [f.frame_id for f in self.state.frames if f.prepared and f.frame_id not in used][:VIEWS_PER_UPDATE]
+
+    def fix_mask_with_box(self, frame_id: str, box: tuple[int, int, int, int]) -> Job | None:
+        """The object is inside this box (x0, y0, x1, y1, full-image pixels) of one view: GrabCut there
+        gives the corrected mask, which `lirm capture --fix-mask` propagates to the other views."""
+        import cv2
+
+        capture = Capture.open(self.state.capture_dir)
+        image = capture.read_image(frame_id)
+        x0, y0, x1, y1 = (int(v) for v in box)
+        h, w = image.shape[:2]
+        x0, x1 = sorted((max(0, min(w - 1, x0)), max(0, min(w, x1))))
+        y0, y1 = sorted((max(0, min(h - 1, y0)), max(0, min(h, y1))))
+        if x1 - x0 < 8 or y1 - y0 < 8:
+            self.state.say("draw a larger box round the object", "warning")
+            return None
+        bgr = cv2.cvtColor(np.asarray(image[..., :3] * 255 if image.dtype != np.uint8 else image[..., :3], np.uint8), cv2.COLOR_RGB2BGR)
+        mask = np.zeros((h, w), np.uint8)
+        bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
+        cv2.grabCut(bgr, mask, (x0, y0, x1 - x0, y1 - y0), bgd, fgd, 4, cv2.GC_INIT_WITH_RECT)
+        fixed = np.where((mask == cv2.GC_FGD) | (mask == cv2.GC_PR_FGD), 255, 0).astype(np.uint8)
+        path = self.state.capture_dir / "app" / f"fixed_mask_{frame_id}.png"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        cv2.imwrite(str(path), fixed)
+        return self._start("capture", f"fixing the mask of {frame_id}",
+                           ["capture", str(path), str(self.state.capture_dir), "--fix-mask", frame_id],
+                           lambda job: self._after_capture_job(job, "fixing the mask"))
+
+    def _after_capture_job(self, job: Job, what: str) -> None:
+        if job.state == "failed":
+            self.state.say(f"{what} failed: {job.error_text()}", "error")
+        self.refresh()
+
+    # ---- reconstruction ------------------------------------------------------------------------
+    def run_update(self) -> Job | None:
+        if self.state.capture_dir is None:
+            self.state.say("open or import a capture first", "warning")
+            return None
+        if self.jobs.running("update"):
+            self.state.say("an update is already running", "warning")
+            return None
+        frames = self.next_views()
+        if not frames:
+            self.state.say("every view is used: import more photos (or step back) for another update", "warning")
+            return None
+        after = self.state.viewing_update
+        number = after + 1
+        args = ["reconstruct", str(self.state.capture_dir), "--frames", ",".join(frames), "--after", str(after),
+                "--novel-views", "1", "--render-size", "64", "--grid-resolution", "64", *self._ckpt()]
+
+        def done(job: Job) -> None:
+            if job.state == "finished":
+                self.state.choices.selected = []
+                self.state.choices.viewing_update = None
+                self.refresh()
+                self.state.save_choices()
+                self.state.say(f"update {number}: {len(frames)} views in {job.seconds:.1f} s")
+                self._show_update(number)
+                if self.state.choices.auto_update and self.next_views():
+                    self.run_update()
+            elif job.state == "failed":
+                self.state.say(f"update {number} failed: {job.error_text()}", "error")
+            else:
+                self.state.say(f"update {number} cancelled; the reconstruction is as it was")
+        return self._start("update", f"LIRM update {number} ({len(frames)} views)", args, done)
+
+    def step_back(self, update: int) -> None:
+        """Look at (and go on from) an earlier update; later ones stay until a new update replaces them."""
+        self.state.choices.viewing_update = max(0, min(update, len(self.state.updates)))
+        self.state.save_choices()
+        self._show_update(self.state.viewing_update)
+
+    def _show_update(self, update: int) -> None:
+        if update < 1 or self.state.capture_dir is None:
+            self.state.preview_asset = None
+            self._notify("asset")
+            return
+        path = self.preview_path(update)
+        if path.is_file() and path.stat().st_mtime >= (self.state.capture_dir / self.state.updates[update - 1]["state"]).stat().st_mtime:
+            self.state.preview_asset = path
+            self._notify("asset")
+            return
+
+        path.parent.mkdir(parents=True, exist_ok=True)
+
+        def done(job: Job) -> None:
+            if job.state == "finished" and self.state.viewing_update == update:
+                self.state.preview_asset = path
+                self._notify("asset")
+            elif job.state == "failed":
+                self.state.say(f"the preview of update {update} failed: {job.error_text()}", "error")
+        self._start("preview", f"preview of update {update}",
+                    ["export", str(self.state.capture_dir), "-o", str(path), "--update", str(update), "--faces", str(PREVIEW_FACES),
+                     "--texture", str(PREVIEW_TEXTURE), "--grid", str(PREVIEW_GRID), "--no-normal-map", *self._ckpt()], done)
+
+    def preview_path(self, update: int) -> Path:
+        return self.state.capture_dir / "app" / "preview" / f"update_{update:02d}.glb"
+
+    # ---- guidance ------------------------------------------------------------------------------
+    def ask_guidance(self, k: int = 4) -> Job | None:
+        if self.state.capture_dir is None:
+            self.state.say("open or import a capture first", "warning")
+            return None
+
+        def done(job: Job) -> None:
+            if job.state == "finished":
+                self._load_guidance()
+                g = self.state.guidance or {}
+                self.state.say(f"guidance: covered {100 * g.get('coverage_now', 0):.0f}% now, "
+                               f"{100 * g.get('coverage_after', 0):.0f}% after {len(g.get('suggestions', []))} more shots")
+                self._notify("guidance")
+            elif job.state == "failed":
+                self.state.say(f"guidance failed: {job.error_text()}", "error")
+        return self._start("suggest", "next-view guidance", ["suggest", str(self.state.capture_dir), "--k", str(k), *self._ckpt()], done)
+
+    def _load_guidance(self) -> None:
+        folder = self.state.capture_dir / "guidance"
+        try:
+            self.state.guidance = json.loads((folder / "suggestions.json").read_text()) if (folder / "suggestions.json").is_file() else None
+            if (folder / "surface_coverage.npz").is_file():
+                with np.load(folder / "surface_coverage.npz") as data:
+                    self.state.coverage = {k: data[k] for k in data.files}
+        except (ValueError, OSError) as err:
+            self.state.say(f"the guidance files in {folder} are damaged ({err}); ask for guidance again", "warning")
+
+    # ---- viewport and lighting -----------------------------------------------------------------
+    def set_channel(self, channel: str) -> None:
+        self.state.choices.view.channel = channel
+        self._changed_view()
+
+    def set_environment(self, name_or_path: str) -> None:
+        self.state.choices.view.environment = str(name_or_path)
+        self._changed_view("environment")
+
+    def set_rotation(self, degrees: float) -> None:
+        self.state.choices.view.rotation_deg = float(degrees) % 360.0
+        self._changed_view("environment")
+
+    def set_exposure(self, ev: float) -> None:
+        self.state.choices.view.exposure_ev = float(ev)
+        self._changed_view()
+
+    def set_background(self, on: bool) -> None:
+        self.state.choices.view.background = bool(on)
+        self._changed_view()
+
+    def set_show_cameras(self, on: bool) -> None:
+        self.state.choices.view.show_cameras = bool(on)
+        self._changed_view()
+
+    def set_show_coverage(self, on: bool) -> None:
+        self.state.choices.view.show_coverage = bool(on)
+        self._changed_view("asset")
+
+    def _changed_view(self, event: str = "view") -> None:
+        self.state.save_choices()
+        self._notify(event)
+
+    # ---- export --------------------------------------------------------------------------------
+    def export(self, path: str | Path | None = None, faces: int | None = None, texture: int | None = None,
+               grid: int | None = None) -> Job | None:
+        if not self.state.updates:
+            self.state.say("nothing to export yet: run an update first", "warning")
+            return None
+        settings = self.state.choices.export
+        settings.faces = faces or settings.faces
+        settings.texture = texture or settings.texture
+        settings.grid = grid or settings.grid
+        out = Path(path or settings.path or self.state.capture_dir / "export" / "asset.glb")
+        settings.path = str(out)
+        self.state.save_choices()
+        args = ["export", str(self.state.capture_dir), "-o", str(out), "--faces", str(settings.faces), "--texture",
+                str(settings.texture), "--grid", str(settings.grid), "--update", str(max(1, self.state.viewing_update)), *self._ckpt()]
+
+        def done(job: Job) -> None:
+            if job.state == "finished":
+                self.state.last_export = out
+                self.state.say(f"exported {out} in {job.seconds:.0f} s")
+            elif job.state == "failed":
+                self.state.say(f"export failed: {job.error_text()}", "error")
+            else:
+                self.state.say("export cancelled; any earlier file there is untouched")
+        return self._start("export", f"exporting {out.name}", args, done, detach_on_exit=True)
+
+    def export_turntable(self, folder: str | Path | None = None) -> Job | None:
+        """An image sequence orbiting the last exported asset under the current lighting."""
+        asset = self.state.last_export or (Path(self.state.choices.export.path) if self.state.choices.export.path else None)
+        if asset is None or not asset.is_file():
+            self.state.say("export the asset first; the turntable shows the exported file", "warning")
+            return None
+        out = Path(folder or asset.with_name(asset.stem + "_turntable"))
+        view = self.state.choices.view
+        args = ["render", str(asset), "--env", view.environment, "--views", str(self.state.choices.export.turntable_frames),
+                "--size", "512x512", "-o", str(out)]
+
+        def done(job: Job) -> None:
+            level = "info" if job.state == "finished" else "error"
+            self.state.say(f"turntable in {out}" if job.state == "finished" else f"turntable failed: {job.error_text()}", level)
+        return self._start("render", "turntable", args, done, detach_on_exit=True)
+
+    # ---- jobs ----------------------------------------------------------------------------------
+    def _start(self, kind: str, title: str, args: list[str], done, detach_on_exit: bool = False) -> Job | None:
+        try:
+            return self.jobs.start(kind, title, args, done, detach_on_exit)
+        except OSError as err:
+            self.state.say(f"could not start {title}: {err}", "error")
+            return None
+
+    def cancel(self, kind: str) -> None:
+        for job in self.jobs.running(kind):
+            self.jobs.cancel(job)

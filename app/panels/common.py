@@ -1,0 +1,23 @@
+"""Small drawing helpers the panels share."""
+
+from __future__ import annotations
+
+from imgui_bundle import imgui
+
+from lirm.app.jobs import Job
+
+COLOURS = {"error": imgui.ImVec4(1.0, 0.45, 0.4, 1.0), "warning": imgui.ImVec4(1.0, 0.8, 0.35, 1.0),
+           "info": imgui.ImVec4(0.85, 0.85, 0.85, 1.0), "ok": imgui.ImVec4(0.55, 0.9, 0.55, 1.0)}
+
+
+def job_progress(job: Job, cancel) -> None:
+    """A progress bar with the job's stage and a Cancel button."""
+    fraction = job.fraction if job.total else (imgui.get_time() * 0.5) % 1.0  # no total yet: keep moving
+    imgui.progress_bar(fraction, imgui.ImVec2(-90, 0), f"{job.stage} ({job.seconds:.0f} s)")
+    imgui.same_line()
+    if imgui.button(f"Cancel##{id(job)}"):
+        cancel(job)
+
+
+def coloured(text: str, level: str) -> None:
+    imgui.text_colored(COLOURS.get(level, COLOURS["info"]), text)

@@ -1,0 +1,40 @@
+"""Export: the glTF with its settings, and a turntable image sequence of it."""
+
+from __future__ import annotations
+
+from imgui_bundle import imgui
+
+from .common import job_progress
+
+
+class ExportPanel:
+    title = "Export"
+
+    def __init__(self, app):
+        self.app = app
+
+    def draw(self) -> None:
+        app, state, actions = self.app, self.app.state, self.app.actions
+        settings = state.choices.export
+        if state.capture_dir is None:
+            imgui.text("Open a capture to export it.")
+            return
+        default = str(state.capture_dir / "export" / "asset.glb")
+        imgui.set_next_item_width(-1)
+        _, settings.path = imgui.input_text("##export_path", settings.path or default)
+        _, settings.faces = imgui.input_int("faces", settings.faces, 1000)
+        _, settings.texture = imgui.input_int("texture side", settings.texture, 256)
+        _, settings.grid = imgui.input_int("grid", settings.grid, 32)
+        running = app.jobs.running("export")
+        imgui.begin_disabled(bool(running) or not state.updates)
+        if imgui.button(f"Export glTF (update {max(1, state.viewing_update)})"):
+            actions.export()
+        app.note_widget("export")
+        imgui.end_disabled()
+        imgui.same_line()
+        if imgui.button("Turntable images"):
+            actions.export_turntable()
+        for job in running + app.jobs.running("render"):
+            job_progress(job, app.jobs.cancel)
+        if state.last_export:
+            imgui.text_wrapped(f"last export: {state.last_export}")

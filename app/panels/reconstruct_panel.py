@@ -1,0 +1,45 @@
+"""Reconstruct: the next LIRM update on demand (or automatically), its progress and cost, and the
+history of updates to step back through."""
+
+from __future__ import annotations
+
+from imgui_bundle import imgui
+
+from .common import coloured, job_progress
+
+
+class ReconstructPanel:
+    title = "Reconstruct"
+
+    def __init__(self, app):
+        self.app = app
+
+    def draw(self) -> None:
+        app, state, actions = self.app, self.app.state, self.app.actions
+        if state.capture_dir is None:
+            imgui.text("Open a capture to reconstruct it.")
+            return
+        running = app.jobs.running("update")
+        imgui.begin_disabled(bool(running))
+        if imgui.button(f"Run update {state.viewing_update + 1}"):
+            actions.run_update()
+        app.note_widget("run_update")
+        imgui.end_disabled()
+        imgui.same_line()
+        changed, auto = imgui.checkbox("automatically as views arrive", state.choices.auto_update)
+        if changed:
+            state.choices.auto_update = auto
+            state.save_choices()
+        imgui.text(f"views for it: {', '.join(actions.next_views()) or 'none left'}")
+        for job in running + app.jobs.running("preview"):
+            job_progress(job, app.jobs.cancel)
+        if state.weights:
+            coloured(f"weights: {state.weights}", "info" if "UNTRAINED" not in state.weights.upper() else "warning")
+        imgui.separator()
+        imgui.text("History (click to step back; the next update goes on from there):")
+        if imgui.selectable("0: nothing yet", state.viewing_update == 0)[0]:
+            actions.step_back(0)
+        for u in state.updates:
+            label = f"{u['update']}: {len(u['frames'])} views in {u.get('seconds', 0):.2f} s  ({', '.join(u['frames'])})"
+            if imgui.selectable(label, state.viewing_update == u["update"])[0]:
+                actions.step_back(u["update"])

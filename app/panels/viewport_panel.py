@@ -1,0 +1,88 @@
+"""Viewport: the asset under the current HDRI, channel switch, orbit/pan/zoom, cameras as frusta."""
+
+from __future__ import annotations
+
+import numpy as np
+from imgui_bundle import imgui
+
+from lirm.app.viewport import frustum_lines
+from lirm.renderer.pbr_renderer import DISPLAY_CHANNELS
+
+INPUT_COLOUR = imgui.IM_COL32(120, 200, 255, 200)
+SUGGESTED_COLOUR = imgui.IM_COL32(120, 255, 120, 230)
+
+
+class ViewportPanel:
+    title = "Viewport"
+
+    def __init__(self, app):
+        self.app = app
+
+    def draw(self) -> None:
+        app, state = self.app, self.app.state
+        viewport = app.viewport
+        if viewport is None:
+            imgui.text("starting the renderer...")
+            return
+        view = state.choices.view
+        for channel in DISPLAY_CHANNELS:
+            if imgui.radio_button(channel, view.channel == channel):
+                app.actions.set_channel(channel)
+            imgui.same_line()
+        changed, show = imgui.checkbox("cameras", view.show_cameras)
+        if changed:
+            app.actions.set_show_cameras(show)
+        imgui.same_line()
+        if viewport.frame_times:
+            imgui.text(f"{1000 * viewport.last_render_seconds:.0f} ms")
+        size = imgui.get_content_region_avail()
+        width, height = int(max(size.x, 16)), int(max(size.y, 16))
+        viewport.render(width, height, view.channel, view.rotation_deg, view.exposure_ev, view.background)
+        origin = imgui.get_cursor_screen_pos()
+        imgui.image(imgui.ImTextureRef(viewport.texture.glo), imgui.ImVec2(width, height), imgui.ImVec2(0, 1), imgui.ImVec2(1, 0))
+        app.note_widget("viewport")
+        self._mouse(width, height)
+        if view.show_cameras and app.world_from_capture is not None:
+            self._frusta(origin, width, height)
+        if state.capture_dir is not None and state.preview_asset is None and not state.updates:
+            imgui.set_cursor_screen_pos(imgui.ImVec2(origin.x + 12, origin.y + 12))
+            imgui.text("No reconstruction yet: pick views in Capture and run an update.")
+
+    def _mouse(self, width: int, height: int) -> None:
+        if not imgui.is_item_hovered():
+            return
+        io = imgui.get_io()
+        orbit = self.app.viewport.orbit
+        dx, dy = io.mouse_delta.x, io.mouse_delta.y
+        moved = False
+        panning = imgui.is_mouse_down(imgui.MouseButton_.right) or (io.key_shift and (
+            imgui.is_mouse_down(imgui.MouseButton_.left) or imgui.is_mouse_down(imgui.MouseButton_.middle)))
+        if (dx or dy) and panning:
+            orbit.pan(dx, dy, height)
+            moved = True
+        elif (dx or dy) and (imgui.is_mouse_down(imgui.MouseButton_.left) or imgui.is_mouse_down(imgui.MouseButton_.middle)):
+            orbit.orbit(dx, dy)
+            moved = True
+        if io.mouse_wheel:
+            orbit.zoom(io.mouse_wheel)
+            moved = True
+        if imgui.is_mouse_double_clicked(imgui.MouseButton_.left) or imgui.is_key_pressed(imgui.Key.f):
+            orbit.frame(self.app.viewport.bounds)
+            moved = True
+        if moved:
+            self.app.viewport.dirty = True
+
+    def _frusta(self, origin, width: int, height: int) -> None:
+        app = self.app
+        draw = imgui.get_window_draw_list()
+        depth = 0.25 * app.capture_scale
+        sets = [(app.capture_cameras, INPUT_COLOUR)]
+        if app.state.guidance:
+            sets.append((app.suggested_cameras, SUGGESTED_COLOUR))
+        for cameras, colour in sets:
+            for camera in cameras:
+                for a, b in frustum_lines(camera, app.world_from_capture, depth):
+                    xy, front = app.viewport.project(np.stack([a, b]), width, height)
+                    if front.all():
+                        draw.add_line(imgui.ImVec2(origin.x + xy[0, 0], origin.y + xy[0, 1]),
+                                      imgui.ImVec2(origin.x + xy[1, 0], origin.y + xy[1, 1]), colour, 1.5)

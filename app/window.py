@@ -1,0 +1,286 @@
+"""`lirm app`: one window with docked panels (Capture, Reconstruct, Viewport, Lighting, Guidance,
+Export, Messages), built on imgui-bundle's runner with moderngl drawing the viewport.
+
+The window never waits on work: posing, updates, guidance and export run as `lirm` jobs (jobs.py),
+polled once per frame. Closing the window while a job runs asks first; an export already under way
+finishes on its own even if the app quits, and everything the user made lives in the capture folder.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .actions import AppActions
+from .app_state import AppState
+from .jobs import JobRunner
+from .panels.capture_panel import CapturePanel
+from .panels.export_panel import ExportPanel
+from .panels.guidance_panel import GuidancePanel
+from .panels.lighting_panel import LightingPanel
+from .panels.log_panel import LogPanel
+from .panels.reconstruct_panel import ReconstructPanel
+from .panels.viewport_panel import ViewportPanel
+
+log = logging.getLogger("lirm.app")
+
+
+@dataclass(frozen=True)
+class AppConfig:
+    capture: Path | None = None
+    demo: bool = False  # open the built-in demo capture (made once, in the background)
+    width: int = 1280
+    height: int = 800
+    checkpoint: Path | None = None
+    script: Path | None = None  # steps run between frames (tests, recorded sessions): see script.py
+    environment_width: int = 512  # built-in environments are rendered at this width
+    extra_environments: tuple[str, ...] = field(default_factory=tuple)  # HDRI files offered besides the built-ins
+
+
+class LirmApp:
+    def __init__(self, config: AppConfig = AppConfig()):
+        self.config = config
+        self.state = AppState()
+        self.jobs = JobRunner()
+        self.actions = AppActions(self.state, self.jobs, config.checkpoint)
+        self.actions.listeners.append(self._on_change)
+        self.panels = [CapturePanel(self), ReconstructPanel(self), ViewportPanel(self), LightingPanel(self),
+                       GuidancePanel(self), ExportPanel(self), LogPanel(self)]
+        self.viewport = None
+        self.ctx = None
+        self.user_environments: list[str] = list(config.extra_environments)
+        self.capture_cameras, self.suggested_cameras = [], []
+        self.world_from_capture: np.ndarray | None = None
+        self.capture_scale = 1.0
+        self._textures: dict = {}
+        self._exit_asked = False
+        self.script = None
+        self.started = time.perf_counter()
+        self.first_frame_seconds: float | None = None
+        self.widget_rects: dict[str, list[float]] = {}  # named buttons' screen rectangles (scripted clicks)
+
+    def note_widget(self, name: str) -> None:
+        """Remember where the last drawn item is, in window pixels: [x0, y0, x1, y1]."""
+        from imgui_bundle import imgui
+
+        a, b = imgui.get_item_rect_min(), imgui.get_item_rect_max()
+        self.widget_rects[name] = [a.x, a.y, b.x, b.y]
+
+    # ---- runner callbacks ----------------------------------------------------------------------
+    def post_init(self) -> None:
+        import moderngl
+
+        from .viewport import Viewport
+
+        self.ctx = moderngl.create_context()
+        self.viewport = Viewport(self.ctx)
+        self._apply_environment()
+        if self.config.capture is not None:
+            self.actions.open_capture(self.config.capture)
+        elif self.config.demo:
+            self.actions.open_demo_capture()
+        if self.config.script is not None:
+            from .script import ScriptRunner
+
+            self.script = ScriptRunner(self, self.config.script)
+
+    def pre_new_frame(self) -> None:
+        self.jobs.poll()
+        if self.script is not None:
+            self.script.step()
+
+    def after_frame(self) -> None:
+        if self.first_frame_seconds is None:
+            self.first_frame_seconds = time.perf_counter() - self.started
+            log.info("first frame after %.2f s", self.first_frame_seconds)
+        if self.script is not None:
+            self.script.after_frame()
+
+    def before_swap(self) -> None:
+        if self.script is not None:
+            self.script.before_swap()
+
+    def confirm_exit(self) -> bool:
+        """Closing with work under way: ask (in the window) instead of dropping it."""
+        if self.jobs.running():
+            self._exit_asked = True
+            return False
+        return True
+
+    def before_exit(self) -> None:
+        left = self.jobs.shutdown()
+        for job in left:
+            log.warning("%s goes on in the background (process %d); its file arrives when it is done", job.title, job.process.pid)
+        self.state.save_choices()
+        for texture in self._textures.values():
+            texture[1].release()
+        if self.viewport is not None:
+            self.viewport.release()
+
+    def show_gui(self) -> None:
+        from imgui_bundle import hello_imgui, imgui
+
+        if self._exit_asked:
+            imgui.open_popup("Work under way")
+            self._exit_asked = False
+        if imgui.begin_popup_modal("Work under way", None, imgui.WindowFlags_.always_auto_resize)[0]:
+            for job in self.jobs.running():
+                imgui.text(f"{job.title}: {job.stage}")
+            imgui.text("Exports finish in the background if you quit now; other work is cancelled.")
+            if imgui.button("Keep working"):
+                imgui.close_current_popup()
+            imgui.same_line()
+            if imgui.button("Quit"):
+                imgui.close_current_popup()
+                hello_imgui.get_runner_params().app_shall_exit = True
+            imgui.end_popup()
+
+    # ---- reacting to the action layer ----------------------------------------------------------
+    def _on_change(self, event: str) -> None:
+        if self.viewport is None:
+            return
+        if event == "capture":
+            self._load_capture_geometry()
+        if event in ("asset", "capture", "guidance"):
+            self._load_asset()
+        if event == "guidance":
+            self._load_suggested_cameras()
+        if event == "environment":
+            self._apply_environment()
+        self.viewport.dirty = True
+
+    def _load_capture_geometry(self) -> None:
+        from lirm.engine.capture.capture_folder import Capture
+        from lirm.engine.export.capture_export import export_transform
+
+        capture = Capture.open(self.state.capture_dir)
+        self.capture_cameras = [capture.cameras[f] for f in sorted(capture.cameras)]
+        self.world_from_capture = export_transform(capture)
+        self.capture_scale = 1.0
+        self._load_suggested_cameras()
+
+    def _load_suggested_cameras(self) -> None:
+        from lirm.engine.cameras import Camera
+
+        self.suggested_cameras = [Camera.from_dict(s["camera"]) for s in (self.state.guidance or {}).get("suggestions", [])]
+
+    def _load_asset(self) -> None:
+        view = self.state.choices.view
+        if view.show_coverage and self.state.coverage is not None and self.world_from_capture is not None:
+            self.viewport.set_asset(None, meshes=[self._coverage_mesh()], frame=self.viewport.scene is None)
+            return
+        path = self.state.preview_asset
+        if path == self.viewport.asset_path and self.viewport.scene is not None:
+            return
+        try:
+            self.viewport.set_asset(path, frame=self.viewport.scene is None)
+        except Exception as err:  # a damaged preview must not take the window down
+            self.state.say(f"cannot show {path}: {err}", "error")
+
+    def _coverage_mesh(self):
+        """The guidance surface coloured by how many cameras see each vertex well: red none, green 3+."""
+        from lirm.renderer.material import PBRMaterial
+        from lirm.renderer.mesh import MeshData
+
+        data = self.state.coverage
+        v = (np.c_[data["vertices"], np.ones(len(data["vertices"]))] @ self.world_from_capture.T)[:, :3]
+        seen = np.clip(data["cameras_seeing"] / 3.0, 0.0, 1.0)
+        colours = np.c_[1.0 - seen, seen, np.zeros_like(seen) + 0.1, np.ones_like(seen)].astype(np.float32) ** 2.2
+        material = PBRMaterial(base_color_factor=(1, 1, 1, 1), metallic_factor=0.0, roughness_factor=0.8, double_sided=True)
+        return MeshData(v.astype(np.float32), data["faces"].astype(np.uint32), colors=colours, material=material, name="coverage")
+
+    def _apply_environment(self) -> None:
+        from lirm.engine.assets.environment_files import resolve_environment
+
+        view = self.state.choices.view
+        try:
+            environment = resolve_environment(view.environment, width=self.config.environment_width)
+        except Exception as err:
+            self.state.say(f"cannot load the environment {view.environment}: {err}; back to the studio", "error")
+            view.environment = "studio"
+            environment = resolve_environment("studio", width=self.config.environment_width)
+        self.viewport.set_environment(environment, view.environment)
+
+    def add_environment(self, path: str) -> None:
+        p = Path(path).expanduser()
+        if not p.is_file() or p.suffix.lower() not in (".hdr", ".exr"):
+            self.state.say(f"{path}: not an .hdr or .exr file", "error")
+            return
+        if str(p) not in self.user_environments:
+            self.user_environments.append(str(p))
+        self.actions.set_environment(str(p))
+
+    def image_texture(self, path: Path):
+        """A PNG as a texture, reloaded when the file changes (the heat map)."""
+        import cv2
+
+        if not path.is_file():
+            return None
+        mtime = path.stat().st_mtime
+        cached = self._textures.get(path)
+        if cached is not None and cached[0] == mtime:
+            return cached[1]
+        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if image is None:
+            return None
+        rgba = np.dstack([cv2.cvtColor(image, cv2.COLOR_BGR2RGB), np.full(image.shape[:2], 255, np.uint8)])
+        texture = self.ctx.texture((image.shape[1], image.shape[0]), 4, rgba.tobytes())
+        if cached is not None:
+            cached[1].release()
+        self._textures[path] = (mtime, texture)
+        return texture
+
+
+def runner_params(app: LirmApp):
+    from imgui_bundle import hello_imgui, imgui
+
+    params = hello_imgui.RunnerParams()
+    params.app_window_params.window_title = "LIRM Studio"
+    params.app_window_params.window_geometry.size = (app.config.width, app.config.height)
+    params.imgui_window_params.default_imgui_window_type = hello_imgui.DefaultImGuiWindowType.provide_full_screen_dock_space
+    params.imgui_window_params.show_status_bar = False
+    params.ini_filename = ""  # the layout is the code's; the user's choices live in the capture
+    params.fps_idling.fps_idle = 10.0  # idle windows redraw slowly; jobs still poll 10 times a second
+
+    def split(new: str, direction, ratio: float, initial: str = "MainDockSpace"):
+        s = hello_imgui.DockingSplit()
+        s.initial_dock, s.new_dock, s.direction, s.ratio = initial, new, direction, ratio
+        return s
+
+    params.docking_params.docking_splits = [
+        split("LeftSpace", imgui.Dir_.left, 0.27),
+        split("RightSpace", imgui.Dir_.right, 0.27),
+        split("BottomSpace", imgui.Dir_.down, 0.2),
+        split("LeftBottom", imgui.Dir_.down, 0.45, "LeftSpace"),
+        split("RightBottom", imgui.Dir_.down, 0.5, "RightSpace"),
+    ]
+    places = {"Capture": "LeftSpace", "Reconstruct": "LeftBottom", "Viewport": "MainDockSpace", "Lighting": "RightSpace",
+              "Guidance": "RightBottom", "Export": "RightSpace", "Messages": "BottomSpace"}
+    windows = []
+    for panel in app.panels:
+        w = hello_imgui.DockableWindow()
+        w.label = panel.title
+        w.dock_space_name = places[panel.title]
+        w.gui_function = panel.draw
+        windows.append(w)
+    params.docking_params.dockable_windows = windows
+    params.callbacks.post_init = app.post_init
+    params.callbacks.pre_new_frame = app.pre_new_frame
+    params.callbacks.show_gui = app.show_gui
+    params.callbacks.after_swap = app.after_frame
+    params.callbacks.before_swap = app.before_swap
+    params.callbacks.confirm_exit = app.confirm_exit
+    params.callbacks.before_exit = app.before_exit
+    return params
+
+
+def run_app(config: AppConfig = AppConfig()) -> LirmApp:
+    from imgui_bundle import immapp
+
+    app = LirmApp(config)
+    immapp.run(runner_params(app))
+    return app
