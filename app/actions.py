@@ -62,11 +62,12 @@ class AppActions:
             self._read_capture(Capture.open(self.state.capture_dir))
 
     def _read_capture(self, capture: Capture) -> None:
+        used_in = {fid: u["update"] for u in capture.updates for fid in u["frames"]}
         frames = []
         for fid in sorted(capture.frames):
             f = capture.frames[fid]
             frames.append(FrameInfo(fid, f.record.original.name, fid in capture.cameras, f.pose_status, f.mask_status,
-                                    capture.prepared_path(fid).is_file(), f.update))
+                                    capture.prepared_path(fid).is_file(), used_in.get(fid)))
         self.state.frames = frames
         self.state.updates = list(capture.updates)
         self.state.weights = capture.updates[-1].get("weights", "") if capture.updates else ""
@@ -296,6 +297,11 @@ class AppActions:
         settings.grid = grid or settings.grid
         out = Path(path or settings.path or self.state.capture_dir / "export" / "asset.glb")
         settings.path = str(out)
+        try:
+            out.parent.mkdir(parents=True, exist_ok=True)  # the user named it in the panel: make its folder
+        except OSError as err:
+            self.state.say(f"cannot export to {out}: {err}; choose another folder", "error")
+            return None
         self.state.save_choices()
         args = ["export", str(self.state.capture_dir), "-o", str(out), "--faces", str(settings.faces), "--texture",
                 str(settings.texture), "--grid", str(settings.grid), "--update", str(max(1, self.state.viewing_update)), *self._ckpt()]

@@ -3,7 +3,9 @@ waits on it: each job reports progress through the command's progress events, ca
 survives in its own process group. Results are files in the capture folder, written atomically by
 the commands themselves, so a job cut short never leaves a half-written file behind.
 
-The runner is polled once per frame from the UI thread; a reader thread per job collects its output.
+The runner is polled once per frame from the UI thread; a reader thread per job follows its output,
+which goes to a log file (not a pipe): a job left to finish after the app quits (an export) must not
+die writing to a reader that is gone, and the logs stay for the user to read.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import sys
 import threading
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Callable
 
 from lirm.engine import progress_events
@@ -39,6 +42,7 @@ class Job:
     output: list[str] = field(default_factory=list)  # stderr and stdout lines, newest last
     process: subprocess.Popen | None = field(default=None, repr=False)
     cancel_requested: float | None = None
+    log_path: Path | None = None
 
     @property
     def fraction(self) -> float:
@@ -55,8 +59,9 @@ class Job:
 
 
 class JobRunner:
-    def __init__(self, python: str = sys.executable, env: dict | None = None):
+    def __init__(self, python: str = sys.executable, env: dict | None = None, log_dir: Path | None = None):
         self.python = python
+        self.log_dir = Path(log_dir) if log_dir else Path.home() / ".cache" / "lirm" / "job_logs"
         self.env = dict(os.environ if env is None else env)
         self.env[progress_events.ENV] = "1"
         self.jobs: list[Job] = []
@@ -66,22 +71,39 @@ class JobRunner:
     def start(self, kind: str, title: str, args: list[str], on_done: Callable[[Job], None] | None = None,
               detach_on_exit: bool = False) -> Job:
         job = Job(kind, title, [self.python, "-m", "lirm.engine.cli", *args], on_done, detach_on_exit)
-        job.process = subprocess.Popen(job.argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1,
-                                       env=self.env, start_new_session=True)
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        job.log_path = self.log_dir / f"{time.strftime('%Y%m%d-%H%M%S')}-{kind}-{os.getpid()}-{len(self.jobs)}.log"
+        with open(job.log_path, "w", encoding="utf-8") as log:
+            log.write(" ".join(job.argv) + "\n")
+            log.flush()
+            job.process = subprocess.Popen(job.argv, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                           env=self.env, start_new_session=True)
         self.jobs.append(job)
-        threading.Thread(target=self._read, args=(job,), daemon=True, name=f"job-{kind}").start()
+        threading.Thread(target=self._follow, args=(job,), daemon=True, name=f"job-{kind}").start()
         return job
 
-    def _read(self, job: Job) -> None:
-        assert job.process is not None and job.process.stdout is not None
-        for raw in job.process.stdout:
-            for line in raw.replace("\r", "\n").splitlines():
-                event = progress_events.parse(line)
-                if event is not None:
-                    job.stage, job.done, job.total = str(event["stage"]), int(event["done"]), int(event["total"])
-                elif line.strip():
-                    job.output.append(line.rstrip())
-                    del job.output[:-200]
+    def _follow(self, job: Job) -> None:
+        """Read the job's log as it grows until the process has ended and the log is read to the end."""
+        assert job.process is not None and job.log_path is not None
+        pending = ""
+        with open(job.log_path, encoding="utf-8", errors="replace") as log:
+            log.readline()  # the command line written above
+            while True:
+                chunk = log.read()
+                if not chunk:
+                    if job.process.poll() is not None:
+                        chunk = log.read()
+                        if not chunk:
+                            break
+                    else:
+                        time.sleep(0.05)
+                        continue
+                pending += chunk
+                *lines, pending = pending.replace("\r", "\n").split("\n")
+                for line in lines:
+                    self._take(job, line)
+        if pending:
+            self._take(job, pending)
         job.returncode = job.process.wait()
         job.finished_at = time.monotonic()
         if job.cancel_requested is not None:
@@ -90,6 +112,15 @@ class JobRunner:
             job.state = "finished" if job.returncode == 0 else "failed"
         with self._lock:
             self._finished.append(job)
+
+    @staticmethod
+    def _take(job: Job, line: str) -> None:
+        event = progress_events.parse(line)
+        if event is not None:
+            job.stage, job.done, job.total = str(event["stage"]), int(event["done"]), int(event["total"])
+        elif line.strip():
+            job.output.append(line.rstrip())
+            del job.output[:-200]
 
     def running(self, kind: str | None = None) -> list[Job]:
         return [j for j in self.jobs if j.state == "running" and (kind is None or j.kind == kind)]

@@ -8,7 +8,9 @@ Steps (one object each):
     {"frames": 5}                                     let the window draw a few frames
     {"screenshot": "name"}                            the whole window, as <out>/name.png
     {"orbit": [dx, dy], "frames": 30}                 orbit the viewport every frame (frame-time figures)
-    {"report_widgets": true}                          write where the panels are (for xdotool clicks)
+    {"report_widgets": true}                          write where the named buttons are (for xdotool clicks)
+    {"wait_updates": 3, "timeout": 300}               until the capture has this many updates (after a real click)
+    {"close_window": true}                            what the window's close button does (asks if work runs)
     {"quit": true}
 Results (screenshots, frame times, timings, errors) go to <out>/script_result.json.
 """
@@ -69,6 +71,20 @@ class ScriptRunner:
                 self.result["errors"].append(f"step {self.index}: jobs still running after {step.get('timeout', 600)} s")
             self.waiting_since = None
             self.frames_left = 2  # let the results show before the next step
+        elif "wait_updates" in step:
+            self.waiting_since = self.waiting_since or time.monotonic()
+            enough = len(self.app.state.updates) >= int(step["wait_updates"]) and not self.app.jobs.running()
+            if not enough and time.monotonic() - self.waiting_since < float(step.get("timeout", 300)):
+                return
+            if not enough:
+                self.result["errors"].append(f"step {self.index}: {len(self.app.state.updates)} updates, not {step['wait_updates']}")
+            self.waiting_since = None
+            self.frames_left = 2
+        elif "close_window" in step:
+            import glfw
+
+            glfw.set_window_should_close(glfw.get_current_context(), True)
+            self.frames_left = 2
         elif "action" in step:
             try:
                 getattr(self.app.actions, step["action"])(*step.get("args", []), **step.get("kwargs", {}))
@@ -119,6 +135,7 @@ class ScriptRunner:
         self._save()
 
     def _report_widgets(self) -> None:
-        """The window's panels with their screen rectangles, and where the named buttons are."""
+        """Where the named buttons are (window pixels), and the window's own title for xdotool."""
         self.result["widgets"] = dict(self.app.widget_rects)
+        self.result["window_title"] = "LIRM Studio"
         self._save()

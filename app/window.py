@@ -58,6 +58,7 @@ class LirmApp:
         self.capture_scale = 1.0
         self._textures: dict = {}
         self._exit_asked = False
+        self.exit_dialog_open = False
         self.script = None
         self.started = time.perf_counter()
         self.first_frame_seconds: float | None = None
@@ -127,6 +128,7 @@ class LirmApp:
         if self._exit_asked:
             imgui.open_popup("Work under way")
             self._exit_asked = False
+        self.exit_dialog_open = imgui.is_popup_open("Work under way")
         if imgui.begin_popup_modal("Work under way", None, imgui.WindowFlags_.always_auto_resize)[0]:
             for job in self.jobs.running():
                 imgui.text(f"{job.title}: {job.stage}")
