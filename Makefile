@@ -13,8 +13,10 @@ GLTF_VALIDATOR := gltf-validator@2.0.0-dev.3.10
 
 .PHONY: demo test setup system-packages bench-render bench-capture clean
 
+# With a display: the app on the built-in demo capture (it reconstructs as the views arrive).
+# Without one: the same flow headless, writing the .glb and the relit pictures into $(DEMO_DIR).
 demo: setup
-	$(BIN)/lirm demo -o $(DEMO_DIR)
+	@if [ -n "$$DISPLAY$$WAYLAND_DISPLAY" ]; then $(BIN)/lirm app --demo; else $(BIN)/lirm demo -o $(DEMO_DIR); fi
 
 test: setup
 	$(BIN)/python -m pytest

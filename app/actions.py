@@ -94,19 +94,26 @@ class AppActions:
                 self.state.say(f"importing {inputs} was cancelled; `lirm capture {target} --resume` finishes it")
         return self._start("capture", f"posing and masking {Path(inputs).name}", args, done)
 
-    def open_demo_capture(self, folder: str | Path | None = None) -> Job | None:
-        """The built-in demo capture (the mug of `lirm demo`), made once and reused."""
+    def open_demo_capture(self, folder: str | Path | None = None, reconstruct: bool = False) -> Job | None:
+        """The built-in demo capture (the mug of `lirm demo`), made once and reused; with `reconstruct`,
+        updates run as views remain (what `make demo` shows)."""
         import os
 
         folder = Path(folder or os.environ.get(DEMO_CAPTURE_ENV) or Path.home() / ".cache" / "lirm" / "demo")
         capture = folder / "capture"
+
+        def opened() -> None:
+            if self.open_capture(capture) and reconstruct and not self.state.updates:
+                self.state.choices.auto_update = True
+                self.run_update()
+
         if (capture / "capture.json").is_file() and Capture.open(capture).cameras:
-            self.open_capture(capture)
+            opened()
             return None
 
         def done(job: Job) -> None:
             if job.state == "finished":
-                self.open_capture(capture)
+                opened()
             else:
                 self.state.say(f"making the demo capture failed: {job.error_text()}", "error")
         return self._start("capture", "making the demo capture (photos of a mug, posed by COLMAP)",
@@ -183,7 +190,9 @@ class AppActions:
                 self.state.choices.viewing_update = None
                 self.refresh()
                 self.state.save_choices()
-                self.state.say(f"update {number}: {len(frames)} views in {job.seconds:.1f} s")
+                memory = f", peak memory {job.peak_memory_mb:.0f} MB" if job.peak_memory_mb else ""
+                self.state.update_costs[number] = (job.seconds, job.peak_memory_mb)
+                self.state.say(f"update {number}: {len(frames)} views in {job.seconds:.1f} s{memory}")
                 self._show_update(number)
                 if self.state.choices.auto_update and self.next_views():
                     self.run_update()

@@ -82,6 +82,7 @@ class AppState:
     messages: list[Message] = field(default_factory=list)
     last_export: Path | None = None
     preview_asset: Path | None = None  # the .glb the viewport shows
+    update_costs: dict[int, tuple[float, float | None]] = field(default_factory=dict)  # update: (job seconds, peak MB)
 
     def say(self, text: str, level: str = "info") -> None:
         self.messages.append(Message(level, text))

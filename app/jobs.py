@@ -43,6 +43,7 @@ class Job:
     process: subprocess.Popen | None = field(default=None, repr=False)
     cancel_requested: float | None = None
     log_path: Path | None = None
+    peak_memory_mb: float | None = None  # the job's peak resident memory, from the kernel at exit
 
     @property
     def fraction(self) -> float:
@@ -56,6 +57,24 @@ class Job:
         """What went wrong, as the command said it (its last error lines)."""
         lines = [line for line in self.output if line.startswith(("error:", "ERROR", "Traceback")) or "Error" in line]
         return "\n".join(lines[-3:] or self.output[-3:])
+
+
+def _has_exited(process: subprocess.Popen) -> bool:
+    """Whether the child has ended, without reaping it (wait4 collects its rusage afterwards)."""
+    try:
+        return os.waitid(os.P_PID, process.pid, os.WEXITED | os.WNOHANG | os.WNOWAIT) is not None
+    except ChildProcessError:
+        return True
+
+
+def _wait_with_usage(process: subprocess.Popen) -> tuple[int, float | None]:
+    """The exit code and peak memory (MB) of a finished child, reaped with wait4 for its rusage."""
+    try:
+        _, status, usage = os.wait4(process.pid, 0)
+    except ChildProcessError:  # already reaped (e.g. by poll): the code is known, the usage is not
+        return process.wait(), None
+    process.returncode = os.waitstatus_to_exitcode(status)
+    return process.returncode, usage.ru_maxrss / 1024.0  # Linux reports kilobytes
 
 
 class JobRunner:
@@ -91,7 +110,7 @@ class JobRunner:
             while True:
                 chunk = log.read()
                 if not chunk:
-                    if job.process.poll() is not None:
+                    if _has_exited(job.process):
                         chunk = log.read()
                         if not chunk:
                             break
@@ -104,7 +123,7 @@ class JobRunner:
                     self._take(job, line)
         if pending:
             self._take(job, pending)
-        job.returncode = job.process.wait()
+        job.returncode, job.peak_memory_mb = _wait_with_usage(job.process)
         job.finished_at = time.monotonic()
         if job.cancel_requested is not None:
             job.state = "cancelled"

@@ -83,7 +83,7 @@ class LirmApp:
         if self.config.capture is not None:
             self.actions.open_capture(self.config.capture)
         elif self.config.demo:
-            self.actions.open_demo_capture()
+            self.actions.open_demo_capture(reconstruct=True)
         if self.config.script is not None:
             from .script import ScriptRunner
 
@@ -117,8 +117,8 @@ class LirmApp:
         for job in left:
             log.warning("%s goes on in the background (process %d); its file arrives when it is done", job.title, job.process.pid)
         self.state.save_choices()
-        for texture in self._textures.values():
-            texture[1].release()
+        for cached in self._textures.values():
+            cached[1].release()
         if self.viewport is not None:
             self.viewport.release()
 
@@ -215,6 +215,38 @@ class LirmApp:
         if str(p) not in self.user_environments:
             self.user_environments.append(str(p))
         self.actions.set_environment(str(p))
+
+    def mask_overlay_texture(self, frame_id: str, longest: int = 512):
+        """A view's working image with its mask tinted, as (texture, scale from full image to texture);
+        cached until the mask file changes."""
+        import cv2
+
+        from lirm.engine.capture.capture_folder import Capture
+
+        capture = Capture.open(self.state.capture_dir)
+        mask_path = capture.mask_path(frame_id)
+        key = ("mask", str(self.state.capture_dir), frame_id)
+        stamp = mask_path.stat().st_mtime if mask_path.is_file() else 0.0
+        cached = self._textures.get(key)
+        if cached is not None and cached[0] == stamp:
+            return cached[1], cached[2]
+        try:
+            image = capture.read_image(frame_id)[..., :3]
+        except Exception as err:
+            self.state.say(str(err), "error")
+            return None
+        scale = min(1.0, longest / max(image.shape[:2]))
+        small = cv2.resize(image, (round(image.shape[1] * scale), round(image.shape[0] * scale)), interpolation=cv2.INTER_AREA)
+        mask = capture.read_mask(frame_id)
+        if mask is not None:
+            inside = cv2.resize(mask, small.shape[1::-1], interpolation=cv2.INTER_NEAREST) > 127
+            small = np.where(inside[..., None], small, (small * 0.35).astype(np.uint8))  # outside the mask: dimmed
+        rgba = np.dstack([small, np.full(small.shape[:2], 255, np.uint8)])
+        texture = self.ctx.texture((small.shape[1], small.shape[0]), 4, np.ascontiguousarray(rgba).tobytes())
+        if cached is not None:
+            cached[1].release()
+        self._textures[key] = (stamp, texture, scale)
+        return texture, scale
 
     def image_texture(self, path: Path):
         """A PNG as a texture, reloaded when the file changes (the heat map)."""

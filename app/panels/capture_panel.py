@@ -14,6 +14,9 @@ class CapturePanel:
     def __init__(self, app):
         self.app = app
         self.path = ""
+        self.inspected: str | None = None  # the view shown below the table, for a mask fix
+        self.box: list[float] | None = None  # drawn box, in the shown image's pixels
+        self._drag_from = None
 
     def draw(self) -> None:
         app, state, actions = self.app, self.app.state, self.app.actions
@@ -56,7 +59,8 @@ class CapturePanel:
                     if changed:
                         actions.toggle_view(f.frame_id)
                 imgui.table_next_column()
-                imgui.text(f.name)
+                if imgui.selectable(f"{f.name}##row_{f.frame_id}", self.inspected == f.frame_id)[0]:
+                    self.inspected, self.box = f.frame_id, None
                 imgui.table_next_column()
                 coloured("posed" if f.posed else f.pose_status, "ok" if f.posed else "warning")
                 imgui.table_next_column()
@@ -64,3 +68,36 @@ class CapturePanel:
                 imgui.table_next_column()
                 imgui.text("" if f.update is None else str(f.update))
             imgui.end_table()
+        if self.inspected is not None:
+            self._inspect(self.inspected)
+
+    def _inspect(self, frame_id: str) -> None:
+        """The view with its mask tinted; drag a box round the object and fix the mask with it."""
+        app = self.app
+        shown = app.mask_overlay_texture(frame_id)
+        if shown is None:
+            return
+        texture, scale = shown
+        imgui.separator()
+        imgui.text(f"{frame_id}: drag a box round the object to redo its mask")
+        width = imgui.get_content_region_avail().x
+        height = width * texture.height / texture.width
+        origin = imgui.get_cursor_screen_pos()
+        imgui.image(imgui.ImTextureRef(texture.glo), imgui.ImVec2(width, height))
+        to_image = texture.width / width  # window pixels -> shown image pixels
+        if imgui.is_item_hovered() and imgui.is_mouse_clicked(imgui.MouseButton_.left):
+            p = imgui.get_mouse_pos()
+            self._drag_from = ((p.x - origin.x) * to_image, (p.y - origin.y) * to_image)
+        if self._drag_from is not None:
+            p = imgui.get_mouse_pos()
+            x, y = (p.x - origin.x) * to_image, (p.y - origin.y) * to_image
+            self.box = [min(self._drag_from[0], x), min(self._drag_from[1], y), max(self._drag_from[0], x), max(self._drag_from[1], y)]
+            if not imgui.is_mouse_down(imgui.MouseButton_.left):
+                self._drag_from = None
+        if self.box is not None:
+            a = imgui.ImVec2(origin.x + self.box[0] / to_image, origin.y + self.box[1] / to_image)
+            b = imgui.ImVec2(origin.x + self.box[2] / to_image, origin.y + self.box[3] / to_image)
+            imgui.get_window_draw_list().add_rect(a, b, imgui.IM_COL32(255, 220, 60, 255), 0.0, 0, 2.0)
+            if imgui.button("Fix the mask with this box"):
+                app.actions.fix_mask_with_box(frame_id, tuple(v / scale for v in self.box))
+                self.box = None

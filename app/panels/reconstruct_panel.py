@@ -40,6 +40,8 @@ class ReconstructPanel:
         if imgui.selectable("0: nothing yet", state.viewing_update == 0)[0]:
             actions.step_back(0)
         for u in state.updates:
-            label = f"{u['update']}: {len(u['frames'])} views in {u.get('seconds', 0):.2f} s  ({', '.join(u['frames'])})"
+            cost = state.update_costs.get(u["update"])
+            extra = f"; job {cost[0]:.1f} s, {cost[1]:.0f} MB peak" if cost and cost[1] else ""
+            label = f"{u['update']}: {len(u['frames'])} views, network {u.get('seconds', 0):.2f} s{extra}  ({', '.join(u['frames'])})"
             if imgui.selectable(label, state.viewing_update == u["update"])[0]:
                 actions.step_back(u["update"])

@@ -1,0 +1,88 @@
+"""The app's action layer without a window: the same calls the panels make, with real `lirm` jobs."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+
+from lirm.app.actions import AppActions
+from lirm.app.app_state import AppState
+from lirm.app.jobs import JobRunner
+
+
+@pytest.fixture
+def app(tmp_path):
+    state = AppState()
+    return AppActions(state, JobRunner(log_dir=tmp_path / "logs"))
+
+
+def test_opening_what_is_not_a_capture_says_what_to_do(app, tmp_path):
+    assert not app.open_capture(tmp_path / "nowhere")
+    assert app.state.messages[-1].level == "error" and "lirm capture" in app.state.messages[-1].text
+    assert app.state.capture_dir is None
+
+
+@pytest.mark.slow
+def test_updates_step_back_and_choices_survive_a_restart(app, lego_capture, tmp_path):
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    assert app.open_capture(capture)
+    frames = [f.frame_id for f in app.state.frames]
+    assert app.next_views() == frames[:4]  # nothing picked: the next unused views
+    app.select_views([frames[6], frames[7], "nonsense"])
+    assert app.state.choices.selected == [frames[6], frames[7]]
+    job = app.run_update()
+    assert job is not None and app.run_update() is None  # one update at a time
+    app.jobs.wait()
+    assert [u["frames"] for u in app.state.updates] == [[frames[6], frames[7]]]
+    assert app.state.choices.selected == [] and app.next_views() == frames[:4]
+    assert job.peak_memory_mb and job.peak_memory_mb > 50
+    app.run_update()
+    app.jobs.wait()
+    assert len(app.state.updates) == 2 and app.state.preview_asset == app.preview_path(2)
+    assert app.preview_path(2).is_file()
+    # Step back to update 1 and go on: update 2 is set aside, the new one takes its place.
+    app.step_back(1)
+    assert app.state.viewing_update == 1
+    app.select_views([frames[5]])
+    app.run_update()
+    app.jobs.wait()
+    assert [u["frames"] for u in app.state.updates] == [[frames[6], frames[7]], [frames[5]]]
+    assert list((capture / "reconstruction" / "set_aside").glob("*/update_02"))
+    app.set_environment("overcast")
+    app.set_channel("normal")
+    # A new session on the same capture opens where this one was.
+    again = AppActions(AppState(), JobRunner(log_dir=tmp_path / "logs"))
+    assert again.open_capture(capture)
+    assert again.state.choices.view.environment == "overcast" and again.state.choices.view.channel == "normal"
+    # A damaged state file: defaults, a warning, and the file left as it was for the user to see.
+    (capture / "app_state.json").write_text("{not json")
+    third = AppActions(AppState(), JobRunner(log_dir=tmp_path / "logs"))
+    assert third.open_capture(capture)
+    assert any("damaged" in m.text for m in third.state.messages) and third.state.choices.view.environment == "studio"
+    assert (capture / "app_state.json").read_text() == "{not json"
+
+
+@pytest.mark.slow
+def test_a_box_redoes_one_views_mask(app, lego_capture, tmp_path):
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    app.open_capture(capture)
+    frame = app.state.frames[0].frame_id
+    before = cv2.imread(str(capture / "masks" / f"{frame}.png"), cv2.IMREAD_GRAYSCALE)
+    h, w = before.shape
+    ys, xs = np.nonzero(before > 127)
+    box = (xs.min() - 5, ys.min() - 5, xs.min() + (xs.max() - xs.min()) // 2, ys.max() + 5)  # the left half only
+    assert app.fix_mask_with_box(frame, box) is not None
+    app.jobs.wait()
+    after = cv2.imread(str(capture / "masks" / f"{frame}.png"), cv2.IMREAD_GRAYSCALE)
+    assert after.shape == (h, w) and (after > 127).sum() < 0.8 * (before > 127).sum()
+    assert not (after[:, box[2] + 2:] > 127).any()  # nothing outside the box
+    history = json.loads((capture / "capture.json").read_text())["history"]
+    assert any(h["action"] == "fix mask" for h in history)
+    assert app.fix_mask_with_box(frame, (10, 10, 12, 12)) is None  # too small: says so
+    assert "larger box" in app.state.messages[-1].text
