@@ -53,6 +53,9 @@ class AppActions:
         self._read_capture(capture)
         self._load_guidance()
         self.state.say(f"opened {capture.root}: {len(capture.cameras)} posed views, {len(capture.updates)} updates")
+        from .recent import remember_capture
+
+        remember_capture(capture.root)
         self._show_update(self.state.viewing_update)
         self._notify("capture")
         return True

@@ -145,6 +145,17 @@ class Viewport:
         self.dirty = False
         return True
 
+    def show_image(self, rgb: np.ndarray, width: int, height: int) -> None:
+        """Put a picture made elsewhere (the field preview) into the viewport's texture, scaled to fit."""
+        import cv2
+
+        self._target(max(int(width), 16), max(int(height), 16))
+        w, h = self.texture.size
+        picture = cv2.resize(np.ascontiguousarray(rgb, np.float32), (w, h), interpolation=cv2.INTER_LINEAR)
+        data = (np.clip(picture, 0, 1) * 255 + 0.5).astype(np.uint8)[::-1]  # GL rows start at the bottom
+        self.texture.write(np.ascontiguousarray(data).tobytes(), alignment=1)
+        self.dirty = False
+
     def _empty_scene(self):
         if not hasattr(self, "_nothing"):
             from lirm.renderer.primitives import uv_sphere

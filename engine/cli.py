@@ -36,6 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap = sub.add_parser("app", help="the desktop app: capture, progressive reconstruction, relighting, guidance and export in one window")
     ap.add_argument("capture", type=Path, nargs="?", help="a capture folder to open (default: an empty project)")
     ap.add_argument("--demo", action="store_true", help="open the built-in demo capture (made once in the background)")
+    ap.add_argument("--new", action="store_true", help="start with an empty project instead of reopening the last capture")
     ap.add_argument("--size", type=_size, default=(1280, 800), help="window size WxH (default 1280x800)")
     ap.add_argument("--checkpoint", type=Path, help="model weights (default: the shipped checkpoint)")
     ap.add_argument("--hdri", action="append", default=[], help="an .hdr/.exr offered in the Lighting panel; repeatable")
@@ -741,7 +742,7 @@ def _run_app(args: argparse.Namespace) -> int:
     from lirm.app.window import AppConfig, run_app
 
     config = AppConfig(capture=args.capture, demo=args.demo, width=args.size[0], height=args.size[1], checkpoint=args.checkpoint,
-                       script=args.script, extra_environments=tuple(args.hdri))
+                       script=args.script, extra_environments=tuple(args.hdri), reopen_last=not args.new)
     run_app(config)
     return 0
 

@@ -17,6 +17,8 @@ class ViewportPanel:
 
     def __init__(self, app):
         self.app = app
+        self._field_size = None
+        self._field_shown = None
 
     def draw(self) -> None:
         app, state = self.app, self.app.state
@@ -25,7 +27,7 @@ class ViewportPanel:
             imgui.text("starting the renderer...")
             return
         view = state.choices.view
-        for channel in DISPLAY_CHANNELS:
+        for channel in DISPLAY_CHANNELS + ("field",):
             if imgui.radio_button(channel, view.channel == channel):
                 app.actions.set_channel(channel)
             imgui.same_line()
@@ -37,7 +39,10 @@ class ViewportPanel:
             imgui.text(f"{1000 * viewport.last_render_seconds:.0f} ms")
         size = imgui.get_content_region_avail()
         width, height = int(max(size.x, 16)), int(max(size.y, 16))
-        viewport.render(width, height, view.channel, view.rotation_deg, view.exposure_ev, view.background)
+        if view.channel == "field":
+            self._field(width, height)
+        else:
+            viewport.render(width, height, view.channel, view.rotation_deg, view.exposure_ev, view.background)
         origin = imgui.get_cursor_screen_pos()
         imgui.image(imgui.ImTextureRef(viewport.texture.glo), imgui.ImVec2(width, height), imgui.ImVec2(0, 1), imgui.ImVec2(1, 0))
         app.note_widget("viewport")
@@ -47,6 +52,27 @@ class ViewportPanel:
         if state.capture_dir is not None and state.preview_asset is None and not state.updates:
             imgui.set_cursor_screen_pos(imgui.ImVec2(origin.x + 12, origin.y + 12))
             imgui.text("No reconstruction yet: pick views in Capture and run an update.")
+
+    def _field(self, width: int, height: int) -> None:
+        """The raw radiance field from this viewpoint, rendered in the background (see field_preview.py)."""
+        app, viewport, preview = self.app, self.app.viewport, self.app.field_preview
+        update = app.state.viewing_update
+        if update < 1 or app.world_from_capture is None:
+            viewport.show_image(np.full((8, 8, 3), 0.18, np.float32), width, height)
+            return
+        if viewport.dirty or self._field_size != (width, height, update):
+            preview.request(app.state.capture_dir, update, app.actions.checkpoint, viewport.orbit.camera(width, height),
+                            app.world_from_capture)
+            self._field_size = (width, height, update)
+            viewport.dirty = False
+        if preview.image is not None and preview.image_key != self._field_shown:
+            viewport.show_image(preview.image, width, height)
+            self._field_shown = preview.image_key
+        if preview.busy():
+            imgui.text("rendering the field...")
+            imgui.same_line()
+        if preview.error:
+            imgui.text(preview.error)
 
     def _mouse(self, width: int, height: int) -> None:
         if not imgui.is_item_hovered():

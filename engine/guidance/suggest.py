@@ -105,9 +105,12 @@ def write_guidance(folder: Path, result: CaptureSuggestions) -> dict[str, Path]:
     suggestions = [{"rank": n, "azimuth_deg": s.azimuth_deg, "elevation_deg": s.elevation_deg, "distance": s.distance,
                     "look_at": list(s.look_at), "gain": s.gain, "sentence": s.sentence, "camera": s.camera.to_dict()}
                    for n, s in enumerate(result.suggestions, start=1)]
+    config = CandidateConfig()
     json_path = atomic_write_json(folder / "suggestions.json", {
         "surface": result.surface, "coverage_now": result.coverage_before, "coverage_after": result.coverage_after,
         "notes": result.notes, "suggestions": suggestions,
+        "heat_map": {"gain": np.round(result.heat_map, 5).tolist(), "elevations_deg": list(config.elevations_deg),
+                     "azimuth_step_deg": config.azimuth_step_deg},
         "frame": "the capture's normalised frame (object in the unit sphere, +Z up); cameras as in transforms.json"})
     arrays = {"vertices": result.vertices, "faces": result.faces, "cameras_seeing": result.vertex_coverage.astype(np.int32)}
     if result.uncertainty is not None:

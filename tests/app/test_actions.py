@@ -15,7 +15,8 @@ from lirm.app.jobs import JobRunner
 
 
 @pytest.fixture
-def app(tmp_path):
+def app(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
     state = AppState()
     return AppActions(state, JobRunner(log_dir=tmp_path / "logs"))
 
@@ -55,6 +56,9 @@ def test_updates_step_back_and_choices_survive_a_restart(app, lego_capture, tmp_
     assert list((capture / "reconstruction" / "set_aside").glob("*/update_02"))
     app.set_environment("overcast")
     app.set_channel("normal")
+    from lirm.app.recent import last_capture
+
+    assert last_capture() == capture.resolve()  # `lirm app` with no argument reopens it
     # A new session on the same capture opens where this one was.
     again = AppActions(AppState(), JobRunner(log_dir=tmp_path / "logs"))
     assert again.open_capture(capture)

@@ -25,8 +25,8 @@ def _start_app(script: dict, folder: Path, display: str) -> tuple[subprocess.Pop
     path = folder / "script.json"
     script["out"] = str(folder / "out")
     path.write_text(json.dumps(script))
-    env = dict(os.environ, DISPLAY=display)
-    proc = subprocess.Popen(LIRM + ["app", "--script", str(path)], env=env, stdout=subprocess.PIPE,
+    env = dict(os.environ, DISPLAY=display, XDG_CONFIG_HOME=str(folder / "config"))
+    proc = subprocess.Popen(LIRM + ["app", "--new", "--script", str(path)], env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
     return proc, folder / "out" / "script_result.json"
 

@@ -1,0 +1,87 @@
+"""The viewport's "field" channel: the raw radiance field of the update being looked at, volume-
+rendered by the LIRM renderer (torch) from the viewport's camera, in a worker thread so the window
+never waits. On a CPU it is a small picture (96 px on the long side by default), enlarged.
+"""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+import numpy as np
+
+from lirm.engine.cameras import Camera
+
+
+def camera_in_capture_frame(camera: Camera, world_from_capture: np.ndarray) -> Camera:
+    """The viewport camera (world = exported frame) in the capture's normalised frame, where the field
+    lives. world_from_capture is a uniform scale plus a translation, so the rotation is unchanged."""
+    scale = float(np.cbrt(np.linalg.det(world_from_capture[:3, :3])))
+    c2w = np.array(camera.c2w, np.float64)
+    c2w[:3, 3] = (c2w[:3, 3] - world_from_capture[:3, 3]) / scale
+    return camera.with_pose(c2w)
+
+
+class FieldPreview:
+    def __init__(self, size: int = 96, samples_per_ray: int = 64):
+        self.size = size
+        self.samples_per_ray = samples_per_ray
+        self._lock = threading.Lock()
+        self._field_key = None
+        self._field = None
+        self._thread: threading.Thread | None = None
+        self._wanted = None  # the latest request: (key, camera)
+        self.image: np.ndarray | None = None  # (H, W, 3) float colour of the last finished render
+        self.image_key = None  # which request it answers
+        self.error: str | None = None
+
+    def busy(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def request(self, capture_dir: Path, update: int, checkpoint, camera: Camera, world_from_capture: np.ndarray) -> None:
+        """Render the field of `update` from `camera` (world frame) when the worker is free; the newest
+        request wins, older ones are dropped."""
+        scale = self.size / max(camera.width, camera.height)
+        small = camera_in_capture_frame(camera.scaled(scale), world_from_capture)
+        key = (str(capture_dir), update, tuple(np.round(small.c2w, 6).ravel()), small.width, small.height)
+        with self._lock:
+            self._wanted = (key, capture_dir, update, checkpoint, small)
+        if not self.busy():
+            self._thread = threading.Thread(target=self._work, daemon=True, name="field-preview")
+            self._thread.start()
+
+    def _work(self) -> None:
+        import torch
+
+        from lirm.engine.model.occupancy_grid import OccupancyConfig, OccupancyGrid
+        from lirm.engine.model.volume_renderer import VolumeRenderConfig, render_camera
+
+        while True:
+            with self._lock:
+                wanted, self._wanted = self._wanted, None
+            if wanted is None:
+                return
+            key, capture_dir, update, checkpoint, camera = wanted
+            try:
+                field = self._decoded(capture_dir, update, checkpoint)
+                config = VolumeRenderConfig(samples_per_ray=self.samples_per_ray, numerical_normals=False)
+                with torch.inference_mode():
+                    grid = OccupancyGrid.build(field, field.radius, config.beta, 2.0 * field.radius / config.samples_per_ray,
+                                               OccupancyConfig(resolution=64))
+                    out = render_camera(field, camera, config, grid)
+                self.image, self.image_key, self.error = np.clip(out["colour"], 0, 1), key, None
+            except Exception as err:  # shown in the viewport, never raised into the window
+                self.error = f"cannot render the field: {err}"
+
+    def _decoded(self, capture_dir: Path, update: int, checkpoint):
+        if self._field_key == (str(capture_dir), update):
+            return self._field
+        from lirm.engine.capture.capture_folder import Capture
+        from lirm.engine.export.capture_export import latest_state_path, reconstruction_model
+        from lirm.engine.model.state_file import load_state
+
+        capture = Capture.open(capture_dir)
+        model = reconstruction_model(capture, checkpoint).model
+        self._field = model.decode(load_state(latest_state_path(capture, update)))
+        self._field_key = (str(capture_dir), update)
+        return self._field
