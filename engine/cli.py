@@ -246,6 +246,34 @@ def _configure_logging(verbose: bool) -> None:
     log.propagate = False
 
 
+def _require_at_least_one(args: argparse.Namespace, *names: str) -> None:
+    """Refuse counts below 1 (None means "not given" and passes)."""
+    for name in names:
+        value = getattr(args, name)
+        if value is not None and value < 1:
+            raise LirmUserError(f"--{name.replace('_', '-')} must be at least 1")
+
+
+def _model_with_warning(checkpoint):
+    """The model to use (see model/pretrained.py), its untrained warning shown on stderr."""
+    from .model.pretrained import load_model
+
+    source = load_model(checkpoint)
+    if source.warning:
+        print(source.warning, file=sys.stderr)
+    return source
+
+
+def _bar_updater(bar):
+    """A (message, done, total) progress callback that moves a tqdm bar and emits progress events."""
+    def progress(message: str, done: int, total: int) -> None:
+        progress_events.emit(message, done, total)
+        bar.n = done
+        bar.set_description(message)
+        bar.refresh()
+    return progress
+
+
 def _progress_bar(total: int, desc: str):
     from tqdm import tqdm
 
@@ -366,11 +394,7 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
 
     if not (args.capture / "capture.json").exists():
         raise LirmUserError(f"{args.capture} is not a capture folder (no capture.json); make one with `lirm capture PHOTOS -o {args.capture}`")
-    for name in ("views_per_update", "novel_views", "render_size", "grid_resolution"):
-        if getattr(args, name) < 1:
-            raise LirmUserError(f"--{name.replace('_', '-')} must be at least 1")
-    if args.updates is not None and args.updates < 1:
-        raise LirmUserError("--updates must be at least 1")
+    _require_at_least_one(args, "views_per_update", "novel_views", "render_size", "grid_resolution", "updates")
     source = load_model(args.checkpoint, args.preset)
     if source.warning:
         print("\n" + "!" * 100 + f"\n{source.warning}\n" + "!" * 100 + "\n", file=sys.stderr)
@@ -475,16 +499,11 @@ def _run_bench_trajectory(args: argparse.Namespace) -> int:
     from .evaluation.report import comparison_table
     from .guidance.trajectory_study import TrajectoryConfig, guided_margin, run_trajectory_study
     from .io.atomic_files import atomic_write, atomic_write_json
-    from .model.pretrained import load_model
     from lirm.renderer.context import create_headless_context
     from lirm.renderer.pbr_renderer import PBRRenderer
 
-    for name in ("objects", "size", "output_views", "mesh_resolution"):
-        if getattr(args, name) < 1:
-            raise LirmUserError(f"--{name.replace('_', '-')} must be at least 1")
-    source = load_model(args.checkpoint)
-    if source.warning:
-        print(source.warning, file=sys.stderr)
+    _require_at_least_one(args, "objects", "size", "output_views", "mesh_resolution")
+    source = _model_with_warning(args.checkpoint)
     ctx = create_headless_context()
     renderer = PBRRenderer(ctx)
     start = time.perf_counter()
@@ -493,14 +512,8 @@ def _run_bench_trajectory(args: argparse.Namespace) -> int:
         config = TrajectoryConfig(mesh_resolution=args.mesh_resolution,
                                   eval=EvalConfig(output_views=args.output_views, mesh_resolution=args.mesh_resolution))
         bar = _progress_bar(3 * len(objects), "trajectories")
-
-        def progress(message: str, done: int, total: int) -> None:
-            bar.n = done
-            bar.set_description(message)
-            bar.refresh()
-
         try:
-            results = run_trajectory_study(source.model, objects, ctx, config, progress=progress)
+            results = run_trajectory_study(source.model, objects, ctx, config, progress=_bar_updater(bar))
         finally:
             bar.close()
     finally:
@@ -598,10 +611,7 @@ def _run_train(args: argparse.Namespace) -> int:
     from .model.config import preset as model_preset
     from .train.trainer import TrainConfig, describe, run_training, scene_config_for
 
-    for name in ("max_steps", "stage_steps", "checkpoint_every"):
-        value = getattr(args, name)
-        if value is not None and value < 1:
-            raise LirmUserError(f"--{name.replace('_', '-')} must be at least 1")
+    _require_at_least_one(args, "max_steps", "stage_steps", "checkpoint_every")
     rank0 = os.environ.get("RANK", "0") == "0"
     scenes = _scene_config(args, scene_config_for(model_preset(args.preset).image_size), rank0)
     config = TrainConfig(preset=args.preset, stage=args.stage, out_dir=str(args.out), max_steps=args.max_steps,
@@ -642,14 +652,9 @@ def _run_eval(args: argparse.Namespace) -> int:
     from .evaluation.evaluate import EvalConfig, evaluate_heldout
     from .evaluation.report import comparison_table, markdown_table
     from .io.atomic_files import atomic_write, atomic_write_json
-    from .model.pretrained import load_model
 
-    for name in ("objects", "size", "updates", "mesh_resolution"):
-        if getattr(args, name) < 1:
-            raise LirmUserError(f"--{name.replace('_', '-')} must be at least 1")
-    source = load_model(args.checkpoint)
-    if source.warning:
-        print(source.warning, file=sys.stderr)
+    _require_at_least_one(args, "objects", "size", "updates", "mesh_resolution")
+    source = _model_with_warning(args.checkpoint)
     model = source.model
     config = EvalConfig(updates=args.updates, output_views=args.output_views, mesh_resolution=args.mesh_resolution)
     objects = _heldout_objects(args)
@@ -664,14 +669,8 @@ def _run_eval(args: argparse.Namespace) -> int:
     for name, reconstructor in contenders:
         bar = _progress_bar(len(objects), f"evaluating {name}")
         bar.unit = "object"
-
-        def progress(message: str, done: int, total: int) -> None:
-            bar.n = done
-            bar.set_description(message)
-            bar.refresh()
-
         try:
-            results.append((name, evaluate_heldout(reconstructor, objects, config, set_name=args.set, progress=progress)))
+            results.append((name, evaluate_heldout(reconstructor, objects, config, set_name=args.set, progress=_bar_updater(bar))))
         finally:
             bar.close()
     if len(results) == 1:
@@ -755,7 +754,11 @@ def _run_demo(args: argparse.Namespace) -> int:
     from .demo import DemoConfig
 
     config = replace(DemoConfig(), capture_only=args.capture_only)
-    result = run_demo(args.out, config, progress=lambda message: progress_events.emit(message, 0, 0) or print(message, file=sys.stderr))
+    def say(message: str) -> None:
+        progress_events.emit(message, 0, 0)
+        print(message, file=sys.stderr)
+
+    result = run_demo(args.out, config, progress=say)
     print(f"demo output is in {result.out_dir.resolve()}/")
     print(f"  overview of every built-in object under every built-in environment: {result.overview}")
     print(f"  synthetic photos: {result.photos}/ (true cameras and masks in {result.out_dir / 'truth'}/)")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -26,10 +27,14 @@ def run_cli(capsys, *args: str) -> tuple[int, str, str]:
 
 def test_help_lists_only_built_subcommands():
     out = subprocess.run([*LIRM, "--help"], capture_output=True, text=True, check=True).stdout
-    for command in ("demo", "render", "capture", "reconstruct", "export", "suggest", "train", "eval", "ship", "bench"):
+    for command in ("app", "demo", "render", "capture", "reconstruct", "export", "suggest", "train", "eval", "ship", "bench"):
         assert f"    {command} " in out
-    for not_yet in ("app",):
-        assert f"    {not_yet} " not in out
+
+
+def test_app_without_a_display_says_what_to_do():
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    done = subprocess.run([*LIRM, "app"], capture_output=True, text=True, env=env)
+    assert done.returncode == 2 and "no display" in done.stderr and "lirm demo" in done.stderr
 
 
 def test_render_builtin_object_writes_every_channel_and_consistent_cameras(tmp_path, capsys):
