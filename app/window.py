@@ -226,6 +226,31 @@ class LirmApp:
             self.user_environments.append(str(p))
         self.actions.set_environment(str(p))
 
+    def thumbnail_texture(self, frame_id: str, size: int = 48):
+        """The view's network crop (masked image) as a small texture, cached until the crop changes."""
+        import cv2
+
+        path = self.state.capture_dir / "prepared" / f"{frame_id}.npz"
+        if not path.is_file():
+            return None
+        key = ("thumb", str(path))
+        stamp = path.stat().st_mtime
+        cached = self._textures.get(key)
+        if cached is not None and cached[0] == stamp:
+            return cached[1]
+        try:
+            with np.load(path) as data:
+                image = data["image_masked"]
+        except (OSError, KeyError, ValueError):
+            return None
+        small = cv2.resize(np.asarray(image, np.float32), (size, size), interpolation=cv2.INTER_AREA)
+        rgba = np.dstack([(np.clip(small, 0, 1) * 255).astype(np.uint8), np.full((size, size), 255, np.uint8)])
+        texture = self.ctx.texture((size, size), 4, np.ascontiguousarray(rgba).tobytes())
+        if cached is not None:
+            cached[1].release()
+        self._textures[key] = (stamp, texture)
+        return texture
+
     def mask_overlay_texture(self, frame_id: str, longest: int = 512):
         """A view's working image with its mask tinted, as (texture, scale from full image to texture);
         cached until the mask file changes."""

@@ -47,8 +47,8 @@ class CapturePanel:
             used = {f for u in state.updates for f in u["frames"]}
             actions.select_views([f.frame_id for f in state.frames if f.prepared and f.frame_id not in used])
         flags = imgui.TableFlags_.borders_inner_h | imgui.TableFlags_.scroll_y | imgui.TableFlags_.row_bg
-        if imgui.begin_table("views", 5, flags, imgui.ImVec2(0, 0)):
-            for name in ("use", "view", "pose", "mask", "update"):
+        if imgui.begin_table("views", 6, flags, imgui.ImVec2(0, 0)):
+            for name in ("use", "", "view", "pose", "mask", "update"):
                 imgui.table_setup_column(name)
             imgui.table_headers_row()
             for f in state.frames:
@@ -58,6 +58,10 @@ class CapturePanel:
                     changed, _ = imgui.checkbox(f"##pick_{f.frame_id}", f.frame_id in state.choices.selected)
                     if changed:
                         actions.toggle_view(f.frame_id)
+                imgui.table_next_column()
+                thumbnail = app.thumbnail_texture(f.frame_id) if f.prepared else None
+                if thumbnail is not None:
+                    imgui.image(imgui.ImTextureRef(thumbnail.glo), imgui.ImVec2(28, 28))
                 imgui.table_next_column()
                 if imgui.selectable(f"{f.name}##row_{f.frame_id}", self.inspected == f.frame_id)[0]:
                     self.inspected, self.box = f.frame_id, None
