@@ -275,7 +275,7 @@ class AppActions:
 
     def set_rotation(self, degrees: float) -> None:
         self.state.choices.view.rotation_deg = float(degrees) % 360.0
-        self._changed_view("environment")
+        self._changed_view()  # applied when drawing: no new environment to prepare
 
     def set_exposure(self, ev: float) -> None:
         self.state.choices.view.exposure_ev = float(ev)

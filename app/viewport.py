@@ -71,7 +71,7 @@ class Viewport:
         self.bounds = np.array([[-0.5, -0.5, -0.5], [0.5, 0.5, 0.5]])
         self.asset_path: Path | None = None
         self._maps = None
-        self._environment_key = None
+        self.environment_key = None
         self.texture: moderngl.Texture | None = None
         self._fbo: moderngl.Framebuffer | None = None
         self._depth = None
@@ -98,12 +98,12 @@ class Viewport:
         self.dirty = True
 
     def set_environment(self, environment: Environment, key) -> None:
-        if key == self._environment_key:
+        if key == self.environment_key:
             return
         if self._maps is not None:
             self._maps.release()
         self._maps = self.renderer.baker.bake(environment)
-        self._environment_key = key
+        self.environment_key = key
         self.dirty = True
 
     # ---- drawing -----------------------------------------------------------------------------

@@ -209,6 +209,8 @@ class LirmApp:
         from lirm.engine.assets.environment_files import resolve_environment
 
         view = self.state.choices.view
+        if view.environment == self.viewport.environment_key:
+            return
         try:
             environment = resolve_environment(view.environment, width=self.config.environment_width)
         except Exception as err:
