@@ -158,6 +158,7 @@ def build_parser() -> argparse.ArgumentParser:
     sh.add_argument("--eval", type=Path, action="append", default=[], help="a lirm eval table (.md) for the card; repeatable")
     sh.add_argument("--notes", type=Path, help="Markdown appended to the card: limitations, what was looked at")
     sh.add_argument("--note", default="", help="one sentence stored in the weights and shown to users whenever they are used")
+    sh.add_argument("--hardware", help="what the run trained on, for runs whose stageN_run.json does not record it")
     sh.add_argument("-o", "--out", type=Path, required=True, help="the weights to write, e.g. resources/checkpoints/lirm-tiny.safetensors")
     sh.set_defaults(run=_run_ship)
 
@@ -701,7 +702,7 @@ def _run_eval(args: argparse.Namespace) -> int:
 def _run_ship(args: argparse.Namespace) -> int:
     from .train.ship import ship
 
-    weights, card = ship(args.checkpoint, args.out, args.runs, args.eval, args.notes, args.note)
+    weights, card = ship(args.checkpoint, args.out, args.runs, args.eval, args.notes, args.note, args.hardware)
     print(f"wrote {weights} ({weights.stat().st_size / 2**20:.2f} MB) and {card}")
     return 0
 

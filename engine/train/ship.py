@@ -40,9 +40,11 @@ class StageRecord:
     loss_last: float | None  # ... and over the last 100
     settings: dict  # stageN_run.json
 
+    hardware_override: str | None = None  # what the user says, for runs that predate the record
+
     @property
     def hardware(self) -> str:
-        return self.settings.get("hardware", "not recorded (run predates the field)")
+        return self.settings.get("hardware") or self.hardware_override or "not recorded"
 
 
 def read_stage_record(run_dir: Path, up_to_step: int | None = None) -> StageRecord:
@@ -137,7 +139,7 @@ def model_card(weights: Path, info: dict, stages: list[StageRecord], eval_tables
 
 
 def ship(checkpoint: Path, out: Path, run_dirs: list[Path], eval_paths: list[Path], notes_path: Path | None,
-         note: str = "") -> tuple[Path, Path]:
+         note: str = "", hardware: str | None = None) -> tuple[Path, Path]:
     for p in [checkpoint, *eval_paths, *([notes_path] if notes_path else [])]:
         if not p.is_file():
             raise LirmUserError(f"{p}: no such file")
@@ -148,6 +150,7 @@ def ship(checkpoint: Path, out: Path, run_dirs: list[Path], eval_paths: list[Pat
         record = read_stage_record(d)
         if record.stage == shipped_at.get("stage"):
             record = read_stage_record(d, int(shipped_at["step"]))
+        record.hardware_override = hardware
         stages.append(record)
     stages.sort(key=lambda s: s.stage)
     if not stages:
