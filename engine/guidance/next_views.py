@@ -71,12 +71,13 @@ def describe_move(from_azimuth: float, from_elevation: float, to_azimuth: float,
 
 
 def greedy_views(coverage: SurfaceCoverage, existing: list[Camera], candidates: list[Camera], k: int,
-                 weights: np.ndarray | None = None) -> tuple[list[int], list[float], np.ndarray]:
+                 weights: np.ndarray | None = None, seen_now: np.ndarray | None = None) -> tuple[list[int], list[float], np.ndarray]:
     """Indices of the k candidates that add the most weighted coverage, chosen one after the other,
-    their gains (shares of the weighted surface), and every candidate's gain before any choice."""
+    their gains (shares of the weighted surface), and every candidate's gain before any choice.
+    `seen_now`: coverage.covered(existing), when the caller has it already."""
     weights = np.ones(len(coverage.points)) if weights is None else np.asarray(weights, np.float64)
     total = float(weights.sum()) or 1.0
-    covered = coverage.covered(existing) > 0
+    covered = (coverage.covered(existing) if seen_now is None else np.asarray(seen_now)) > 0
     seen = coverage.seen_many(candidates)
     first = np.array([float(weights[s & ~covered].sum()) / total for s in seen])
     chosen, gains = [], []
@@ -92,10 +93,11 @@ def greedy_views(coverage: SurfaceCoverage, existing: list[Camera], candidates: 
 
 
 def suggest_next_views(coverage: SurfaceCoverage, existing: list[Camera], k: int = 4,
-                       weights: np.ndarray | None = None, config: CandidateConfig = CandidateConfig()) -> tuple[list[Suggestion], np.ndarray]:
+                       weights: np.ndarray | None = None, config: CandidateConfig = CandidateConfig(),
+                       seen_now: np.ndarray | None = None) -> tuple[list[Suggestion], np.ndarray]:
     """The next k views (greedy) and every candidate's initial gain as a (elevations, azimuths) heat map."""
     candidates = candidate_cameras(existing, config)
-    chosen, gains, first = greedy_views(coverage, existing, [camera for _, _, camera in candidates], k, weights)
+    chosen, gains, first = greedy_views(coverage, existing, [camera for _, _, camera in candidates], k, weights, seen_now)
     azimuths = np.arange(0.0, 360.0, config.azimuth_step_deg)
     heat_map = first.reshape(len(config.elevations_deg), len(azimuths))
     last = camera_angles(existing[-1]) if existing else (0.0, 20.0, 2.5)

@@ -86,7 +86,8 @@ def suggest_for_capture(renderer, capture_dir: str | Path, k: int = 4, checkpoin
     try:
         vertex_coverage = coverage.covered(cameras)
         clock.lap("coverage")
-        suggestions, heat = suggest_next_views(coverage, cameras, k, weights=weights, config=CandidateConfig())
+        suggestions, heat = suggest_next_views(coverage, cameras, k, weights=weights, config=CandidateConfig(),
+                                               seen_now=vertex_coverage)
         clock.lap("candidates")
         after = coverage.covered(cameras + [s.camera for s in suggestions])
     finally:
