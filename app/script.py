@@ -8,6 +8,7 @@ Steps (one object each):
     {"frames": 5}                                     let the window draw a few frames
     {"screenshot": "name"}                            the whole window, as <out>/name.png
     {"orbit": [dx, dy], "frames": 30}                 orbit the viewport every frame (frame-time figures)
+    {"zoom": -6}                                      wheel steps on the viewport (negative: out)
     {"report_widgets": true}                          write where the named buttons are (for xdotool clicks)
     {"wait_updates": 3, "timeout": 300}               until the capture has this many updates (after a real click)
     {"close_window": true}                            what the window's close button does (asks if work runs)
@@ -96,6 +97,10 @@ class ScriptRunner:
             self._last_frame = None
             self.result["frame_seconds"] = []
             self.frames_left = int(step.get("frames", 30))
+        elif "zoom" in step:
+            self.app.viewport.orbit.zoom(float(step["zoom"]))
+            self.app.viewport.dirty = True
+            self.frames_left = 1
         elif "frames" in step:
             self.frames_left = int(step["frames"])
         elif "screenshot" in step:

@@ -21,11 +21,11 @@ pytestmark = [pytest.mark.display, pytest.mark.slow]
 LIRM = [sys.executable, "-m", "lirm.engine.cli"]
 
 
-def _start_app(script: dict, folder: Path, display: str) -> tuple[subprocess.Popen, Path]:
+def _start_app(script: dict, folder: Path, display: str, env_extra: dict | None = None) -> tuple[subprocess.Popen, Path]:
     path = folder / "script.json"
     script["out"] = str(folder / "out")
     path.write_text(json.dumps(script))
-    env = dict(os.environ, DISPLAY=display, XDG_CONFIG_HOME=str(folder / "config"))
+    env = dict(os.environ, DISPLAY=display, XDG_CONFIG_HOME=str(folder / "config"), **(env_extra or {}))
     proc = subprocess.Popen(LIRM + ["app", "--new", "--script", str(path)], env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
     return proc, folder / "out" / "script_result.json"
@@ -49,15 +49,16 @@ def _object_share(image: np.ndarray, rect: list[float], empty: np.ndarray) -> fl
     return float((np.abs(view - empty).max(axis=-1) > 12).mean())
 
 
-def test_a_whole_session_in_the_window(lego_capture, tmp_path, x_display):
+def test_a_whole_session_in_the_window(tmp_path, x_display):
     if shutil.which("xdotool") is None:
         pytest.skip("xdotool is not installed (`make setup` installs it)")
-    capture = tmp_path / "capture"
-    shutil.copytree(lego_capture, capture)
+    demo = tmp_path / "demo"  # the built-in demo capture, made by the app's own job (LIRM_DEMO_CAPTURE)
+    capture = demo / "capture"
     asset = tmp_path / "out" / "asset.glb"
     script = {"steps": [
         {"frames": 3}, {"screenshot": "01_empty"},
-        {"action": "open_capture", "args": [str(capture)]}, {"action": "set_background", "args": [False]},
+        {"action": "open_demo_capture"}, {"wait": "jobs", "timeout": 400},
+        {"action": "set_background", "args": [False]},
         {"screenshot": "02_opened"},
         {"action": "run_update"}, {"wait": "jobs"}, {"screenshot": "03_update1"},
         {"report_widgets": True},
@@ -69,11 +70,12 @@ def test_a_whole_session_in_the_window(lego_capture, tmp_path, x_display):
         {"screenshot": "06_sky"},
         {"action": "ask_guidance"}, {"wait": "jobs"}, {"screenshot": "07_guidance"},
         {"action": "export", "args": [str(asset), 3000, 256, 64]}, {"wait": "jobs"}, {"screenshot": "08_exported"},
+        {"action": "set_background", "args": [False]}, {"zoom": -9}, {"screenshot": "09_cameras"},
         {"orbit": [3, 0], "frames": 15},
         {"quit": True}]}
-    proc, result_path = _start_app(script, tmp_path, x_display)
+    proc, result_path = _start_app(script, tmp_path, x_display, {"LIRM_DEMO_CAPTURE": str(demo)})
     try:
-        deadline = time.time() + 300
+        deadline = time.time() + 600
         while "widgets" not in _result(result_path) and time.time() < deadline and proc.poll() is None:
             time.sleep(0.5)
         widgets = _result(result_path).get("widgets", {})
@@ -94,7 +96,8 @@ def test_a_whole_session_in_the_window(lego_capture, tmp_path, x_display):
     assert result["errors"] == [], result["errors"]
     assert result["first_frame_seconds"] < 10  # the figure is reported by `lirm bench`-style notes, not asserted tight
     shots = {name: cv2.imread(path)[..., ::-1] for name, path in result["screenshots"].items()}
-    assert set(shots) == {"01_empty", "02_opened", "03_update1", "04_update2", "05_albedo", "06_sky", "07_guidance", "08_exported"}
+    assert set(shots) == {"01_empty", "02_opened", "03_update1", "04_update2", "05_albedo", "06_sky", "07_guidance",
+                          "08_exported", "09_cameras"}
     viewport = widgets["viewport"]
     assert all(s.shape[:2] == (800, 1280) for s in shots.values())
     # Panels present: the left column (Capture, Reconstruct) is full of text once a capture is open.
@@ -116,6 +119,11 @@ def test_a_whole_session_in_the_window(lego_capture, tmp_path, x_display):
     report = validate_gltf(asset)
     assert report.errors == 0, report.messages
     assert len(result["frame_seconds"]) >= 10
+    # Zoomed out, the 16 input cameras show as blue frusta round the asset, the suggested shots as green ones.
+    view = _viewport(shots["09_cameras"], viewport).astype(int)
+    blue = (view[..., 2] > 200) & (view[..., 1] > 150) & (view[..., 0] < 160)
+    green = (view[..., 1] > 200) & (view[..., 0] < 160) & (view[..., 2] < 160)
+    assert blue.sum() > 200 and green.sum() > 30, (blue.sum(), green.sum())
     # Reopening the capture finds the window's choices where they were left.
     saved = json.loads((capture / "app_state.json").read_text())
     assert saved["view"]["environment"] == "sky" and saved["view"]["channel"] == "beauty"
