@@ -60,7 +60,8 @@ class LirmApp:
         self.capture_cameras, self.suggested_cameras = [], []
         self.world_from_capture: np.ndarray | None = None
         self.capture_scale = 1.0
-        self._textures: dict = {}
+        self._textures: dict = {}  # key -> (file mtime, texture)
+        self._overlay_scales: dict = {}  # mask overlay key -> scale from the full image to its texture
         self._exit_asked = False
         self.exit_dialog_open = False
         self.script = None
@@ -228,6 +229,21 @@ class LirmApp:
             self.user_environments.append(str(p))
         self.actions.set_environment(str(p))
 
+    def _cached_texture(self, key, stamp: float, make_rgba):
+        """A texture made by make_rgba() -> (H, W, 4) uint8, remade only when `stamp` changes (a file's
+        mtime), the old one released. None when make_rgba() has nothing to show."""
+        cached = self._textures.get(key)
+        if cached is not None and cached[0] == stamp:
+            return cached[1]
+        rgba = make_rgba()
+        if rgba is None:
+            return None
+        texture = self.ctx.texture((rgba.shape[1], rgba.shape[0]), 4, np.ascontiguousarray(rgba).tobytes())
+        if cached is not None:
+            cached[1].release()
+        self._textures[key] = (stamp, texture)
+        return texture
+
     def thumbnail_texture(self, frame_id: str, size: int = 48):
         """The view's network crop (masked image) as a small texture, cached until the crop changes."""
         import cv2
@@ -235,75 +251,45 @@ class LirmApp:
         path = self.state.capture_dir / "prepared" / f"{frame_id}.npz"
         if not path.is_file():
             return None
-        key = ("thumb", str(path))
-        stamp = path.stat().st_mtime
-        cached = self._textures.get(key)
-        if cached is not None and cached[0] == stamp:
-            return cached[1]
-        try:
-            with np.load(path) as data:
-                image = data["image_masked"]
-        except (OSError, KeyError, ValueError):
-            return None
-        small = cv2.resize(np.asarray(image, np.float32), (size, size), interpolation=cv2.INTER_AREA)
-        rgba = np.dstack([(np.clip(small, 0, 1) * 255).astype(np.uint8), np.full((size, size), 255, np.uint8)])
-        texture = self.ctx.texture((size, size), 4, np.ascontiguousarray(rgba).tobytes())
-        if cached is not None:
-            cached[1].release()
-        self._textures[key] = (stamp, texture)
-        return texture
+
+        def make():
+            try:
+                with np.load(path) as data:
+                    image = data["image_masked"]
+            except (OSError, KeyError, ValueError):
+                return None
+            small = cv2.resize(np.asarray(image, np.float32), (size, size), interpolation=cv2.INTER_AREA)
+            return np.dstack([(np.clip(small, 0, 1) * 255).astype(np.uint8), np.full((size, size), 255, np.uint8)])
+        return self._cached_texture(("thumb", str(path)), path.stat().st_mtime, make)
 
     def mask_overlay_texture(self, frame_id: str, longest: int = 512):
         """A view's working image with its mask tinted, as (texture, scale from full image to texture);
-        cached until the mask file changes."""
+        cached until the mask file changes (the capture is read only then, not every frame)."""
         import cv2
 
         from lirm.engine.capture.capture_folder import Capture
 
-        capture = Capture.open(self.state.capture_dir)
-        mask_path = capture.mask_path(frame_id)
-        key = ("mask", str(self.state.capture_dir), frame_id)
+        mask_path = self.state.capture_dir / "masks" / f"{frame_id}.png"  # Capture.mask_path's layout
         stamp = mask_path.stat().st_mtime if mask_path.is_file() else 0.0
-        cached = self._textures.get(key)
-        if cached is not None and cached[0] == stamp:
-            return cached[1], cached[2]
-        try:
-            image = capture.read_image(frame_id)[..., :3]
-        except Exception as err:
-            self.state.say(str(err), "error")
-            return None
-        scale = min(1.0, longest / max(image.shape[:2]))
-        small = cv2.resize(image, (round(image.shape[1] * scale), round(image.shape[0] * scale)), interpolation=cv2.INTER_AREA)
-        mask = capture.read_mask(frame_id)
-        if mask is not None:
-            inside = cv2.resize(mask, small.shape[1::-1], interpolation=cv2.INTER_NEAREST) > 127
-            small = np.where(inside[..., None], small, (small * 0.35).astype(np.uint8))  # outside the mask: dimmed
-        rgba = np.dstack([small, np.full(small.shape[:2], 255, np.uint8)])
-        texture = self.ctx.texture((small.shape[1], small.shape[0]), 4, np.ascontiguousarray(rgba).tobytes())
-        if cached is not None:
-            cached[1].release()
-        self._textures[key] = (stamp, texture, scale)
-        return texture, scale
+        key = ("mask", str(self.state.capture_dir), frame_id)
 
-    def image_texture(self, path: Path):
-        """A PNG as a texture, reloaded when the file changes (the heat map)."""
-        import cv2
-
-        if not path.is_file():
-            return None
-        mtime = path.stat().st_mtime
-        cached = self._textures.get(path)
-        if cached is not None and cached[0] == mtime:
-            return cached[1]
-        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-        if image is None:
-            return None
-        rgba = np.dstack([cv2.cvtColor(image, cv2.COLOR_BGR2RGB), np.full(image.shape[:2], 255, np.uint8)])
-        texture = self.ctx.texture((image.shape[1], image.shape[0]), 4, rgba.tobytes())
-        if cached is not None:
-            cached[1].release()
-        self._textures[path] = (mtime, texture)
-        return texture
+        def make():
+            capture = Capture.open(self.state.capture_dir)
+            try:
+                image = capture.read_image(frame_id)[..., :3]
+            except Exception as err:
+                self.state.say(str(err), "error")
+                return None
+            s = min(1.0, longest / max(image.shape[:2]))
+            small = cv2.resize(image, (round(image.shape[1] * s), round(image.shape[0] * s)), interpolation=cv2.INTER_AREA)
+            mask = capture.read_mask(frame_id)
+            if mask is not None:
+                inside = cv2.resize(mask, small.shape[1::-1], interpolation=cv2.INTER_NEAREST) > 127
+                small = np.where(inside[..., None], small, (small * 0.35).astype(np.uint8))  # outside the mask: dimmed
+            self._overlay_scales[key] = s
+            return np.dstack([small, np.full(small.shape[:2], 255, np.uint8)])
+        texture = self._cached_texture(key, stamp, make)
+        return None if texture is None else (texture, self._overlay_scales[key])
 
 
 def runner_params(app: LirmApp):

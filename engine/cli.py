@@ -255,6 +255,11 @@ def _require_at_least_one(args: argparse.Namespace, *names: str) -> None:
             raise LirmUserError(f"--{name.replace('_', '-')} must be at least 1")
 
 
+def _require_capture(folder: Path) -> None:
+    if not (folder / "capture.json").exists():
+        raise LirmUserError(f"{folder} is not a capture folder (no capture.json); make one with `lirm capture PHOTOS -o {folder}`")
+
+
 def _model_with_warning(checkpoint):
     """The model to use (see model/pretrained.py), its untrained warning shown on stderr."""
     from .model.pretrained import load_model
@@ -393,8 +398,7 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
     from .model.pretrained import load_model
     from .reconstruction.session import ReconstructConfig, run_reconstruction
 
-    if not (args.capture / "capture.json").exists():
-        raise LirmUserError(f"{args.capture} is not a capture folder (no capture.json); make one with `lirm capture PHOTOS -o {args.capture}`")
+    _require_capture(args.capture)
     _require_at_least_one(args, "views_per_update", "novel_views", "render_size", "grid_resolution", "updates")
     source = load_model(args.checkpoint, args.preset)
     if source.warning:
@@ -469,8 +473,7 @@ def _run_suggest(args: argparse.Namespace) -> int:
 
     if args.k < 1:
         raise LirmUserError("--k must be at least 1")
-    if not (args.capture / "capture.json").exists():
-        raise LirmUserError(f"{args.capture} is not a capture folder (no capture.json); make one with `lirm capture`")
+    _require_capture(args.capture)
     ctx = create_headless_context()
     try:
         result = suggest_for_capture(ctx, args.capture, args.k, args.checkpoint)
@@ -551,8 +554,7 @@ def _run_bench_suggest(args: argparse.Namespace) -> int:
     from .guidance.suggest import suggest_for_capture
     from lirm.renderer.context import create_headless_context
 
-    if not (args.capture / "capture.json").exists():
-        raise LirmUserError(f"{args.capture} is not a capture folder (no capture.json); make one with `lirm capture`")
+    _require_capture(args.capture)
     if args.repeats < 1 or args.k < 1:
         raise LirmUserError("--repeats and --k must be at least 1")
     start = time.perf_counter()

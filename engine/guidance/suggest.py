@@ -38,26 +38,41 @@ class CaptureSuggestions:
     uncertainty: np.ndarray | None  # (V,) the model's uncertainty in [0, 1], None before a reconstruction
 
 
+BOUNDING_SPHERE_RADIUS = 0.8  # the normalised object fits the unit sphere with some room
+
+
+def bounding_sphere() -> trimesh.Trimesh:
+    return trimesh.creation.icosphere(3, radius=BOUNDING_SPHERE_RADIUS)
+
+
+def field_surface(field, resolution: int, face_budget: int = 5000) -> tuple[trimesh.Trimesh, str | None]:
+    """The field's mesh to cover, or the bounding sphere and why, when the field has no surface yet."""
+    from lirm.engine.export.field_mesh import MeshExtractionConfig, NoSurfaceError, extract_field_mesh
+
+    try:
+        return extract_field_mesh(field, MeshExtractionConfig(resolution=resolution, face_budget=face_budget)), None
+    except NoSurfaceError as err:
+        return bounding_sphere(), str(err)
+
+
 def _surface(capture: Capture, checkpoint, grid: int) -> tuple[trimesh.Trimesh, str, list[str], list]:
     """The surface to cover, where it came from, notes for the user, and the last two updates' fields."""
     notes = []
     if capture.updates:
         from lirm.engine.export.capture_export import latest_state_path, reconstruction_model
-        from lirm.engine.export.field_mesh import MeshExtractionConfig, NoSurfaceError, extract_field_mesh
         from lirm.engine.model.state_file import load_state
 
         model = reconstruction_model(capture, checkpoint).model
         latest = model.decode(load_state(latest_state_path(capture)))
         previous_state = capture.root / capture.updates[-2]["state"] if len(capture.updates) > 1 else None
         fields = ([model.decode(load_state(previous_state))] if previous_state and previous_state.is_file() else []) + [latest]
-        try:
-            mesh = extract_field_mesh(latest, MeshExtractionConfig(resolution=grid, face_budget=5000))
+        mesh, why_not = field_surface(latest, grid)
+        if why_not is None:
             return mesh, f"reconstruction after update {len(capture.updates)}", notes, fields
-        except NoSurfaceError as err:
-            notes.append(f"the reconstruction has no surface yet ({err}); using the bounding sphere instead")
+        notes.append(f"the reconstruction has no surface yet ({why_not}); using the bounding sphere instead")
     else:
         notes.append("no reconstruction yet: suggestions come from how the cameras cover the object's bounding sphere")
-    return trimesh.creation.icosphere(3, radius=0.8), "bounding sphere", notes, []
+    return bounding_sphere(), "bounding sphere", notes, []
 
 
 def suggest_for_capture(renderer, capture_dir: str | Path, k: int = 4, checkpoint=None, grid: int = 64,

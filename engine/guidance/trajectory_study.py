@@ -23,10 +23,10 @@ import trimesh
 from lirm.engine.evaluation.evaluate import (EvalConfig, EvalResult, model_device, model_inputs, score_field,
                                              update_scores)
 from lirm.engine.evaluation.heldout_sets import HeldoutObject
-from lirm.engine.export.field_mesh import MeshExtractionConfig, NoSurfaceError, extract_field_mesh
 
 from .coverage import SurfaceCoverage
 from .next_views import camera_angles, greedy_views
+from .suggest import field_surface
 from .uncertainty import guidance_weights, vertex_uncertainty
 
 STRATEGIES = ("guided", "random", "sequential")
@@ -48,17 +48,9 @@ def azimuth_order(obj: HeldoutObject) -> list[int]:
     return sorted(pool, key=lambda i: (round(angles[i][0], 3), angles[i][1]))
 
 
-def guidance_surface(fields: list, resolution: int = 48) -> trimesh.Trimesh:
-    """The latest field's mesh, or the bounding sphere when it has no surface yet."""
-    try:
-        return extract_field_mesh(fields[-1], MeshExtractionConfig(resolution=resolution, face_budget=3000))
-    except NoSurfaceError:
-        return trimesh.creation.icosphere(3, radius=0.8)
-
-
 def guided_choice(gl, fields: list, obj: HeldoutObject, used: list[int], remaining: list[int], k: int,
                   resolution: int = 48) -> list[int]:
-    mesh = guidance_surface(fields, resolution)
+    mesh, _ = field_surface(fields[-1], resolution, face_budget=3000)  # no surface yet: the bounding sphere
     weights = guidance_weights(vertex_uncertainty(fields, mesh.vertices, mesh.vertex_normals)["total"])
     coverage = SurfaceCoverage(gl, mesh.vertices, mesh.faces, mesh.vertex_normals)
     try:
