@@ -50,11 +50,20 @@ def to_gltf_frame(mesh: TexturedMesh, world_transform: np.ndarray | None = None)
         raise LirmUserError("the export transform is singular; the capture's normalisation is broken")
     rotation = linear / scale
     positions = mesh.positions.astype(np.float64) @ linear.T + m[:3, 3]
-    normals = mesh.normals.astype(np.float64) @ rotation.T
-    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
-    tangents = np.concatenate([mesh.tangents[:, :3].astype(np.float64) @ rotation.T, mesh.tangents[:, 3:]], axis=1)
-    tangents[:, :3] /= np.maximum(np.linalg.norm(tangents[:, :3], axis=1, keepdims=True), 1e-12)
+    # Vertices of degenerate faces can have zero normals or tangents, which glTF validators refuse:
+    # they get +Y, and a tangent perpendicular to their normal.
+    normals = _unit(mesh.normals.astype(np.float64) @ rotation.T, np.tile([0.0, 1.0, 0.0], (len(positions), 1)))
+    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    tangents = _unit(mesh.tangents[:, :3].astype(np.float64) @ rotation.T, np.cross(normals, helper))
+    tangents = np.concatenate([tangents, mesh.tangents[:, 3:]], axis=1)
     return positions.astype(np.float32), normals.astype(np.float32), tangents.astype(np.float32)
+
+
+def _unit(v: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    """Rows scaled to unit length; zero rows taken from `fallback` (same shape), made unit too."""
+    zero = np.linalg.norm(v, axis=1) < 1e-12
+    v = np.where(zero[:, None], fallback, v)
+    return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-12)
 
 
 def glb_bytes(mesh: TexturedMesh, world_transform: np.ndarray | None = None) -> bytes:
