@@ -15,7 +15,8 @@ from typing import Callable, Protocol
 import numpy as np
 import torch
 
-from lirm.engine.export.marching_cubes import extract_mesh
+from lirm.engine.export.field_mesh import field_sdf_grid
+from lirm.engine.export.marching_cubes import marching_cubes
 from lirm.engine.metrics import psnr, scaled_albedo_psnr, ssim
 from lirm.engine.model.field import device_of
 from lirm.engine.model.occupancy_grid import OccupancyConfig, OccupancyGrid
@@ -84,12 +85,9 @@ def _finite_mean(values: list[float]) -> float | None:
     return float(np.mean(finite)) if finite else None
 
 
-def _field_mesh_points(field, config: EvalConfig, device) -> np.ndarray:
-    def sdf(points: np.ndarray) -> np.ndarray:
-        with torch.no_grad():
-            return field.sdf(torch.from_numpy(points).to(device)[None])[0].float().cpu().numpy()
-
-    mesh = extract_mesh(sdf, config.mesh_resolution, field.radius)
+def _field_mesh_points(field, config: EvalConfig) -> np.ndarray:
+    values, origin, spacing = field_sdf_grid(field, config.mesh_resolution, narrow_band_stride=4)
+    mesh = marching_cubes(values, origin, spacing)
     return surface_samples(mesh.vertices, mesh.faces, config.chamfer_points, seed=0)
 
 
@@ -132,7 +130,7 @@ def score_field(field_, obj: HeldoutObject, outputs: list[int], config: EvalConf
             scores.setdefault("roughness", []).append(psnr(out["roughness"], truth.roughness[i] / denom, inside))
             scores.setdefault("metallic", []).append(psnr(out["metallic"], truth.metallic[i] / denom, inside))
     if obj.surface is not None and len(obj.surface):
-        scores.setdefault("chamfer", []).append(chamfer_distance(_field_mesh_points(field_, config, device), obj.surface))
+        scores.setdefault("chamfer", []).append(chamfer_distance(_field_mesh_points(field_, config), obj.surface))
 
 
 def update_scores(update: int, s: dict[str, list[float]]) -> UpdateScores:

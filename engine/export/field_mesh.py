@@ -20,6 +20,7 @@ from lirm.engine.errors import LirmUserError
 from lirm.engine.model.field import device_of
 
 from .marching_cubes import marching_cubes, sample_sdf_grid
+from .narrow_band import sample_sdf_narrow_band
 
 Progress = Callable[[str, int, int], None]
 
@@ -31,21 +32,28 @@ class MeshExtractionConfig:
     floater_fraction: float = 0.02  # components with fewer faces than this share of the largest are dropped
     keep_all_significant: bool = True  # keep every component above that share (handles, lids), not only the largest
     face_budget: int | None = 20_000  # decimate to at most this many faces (None: keep all)
+    narrow_band_stride: int = 4  # SDF exact only in coarse cells of this many samples near the surface (0: every sample)
 
 
 class NoSurfaceError(LirmUserError):
     """The SDF has no zero crossing inside the bounding sphere."""
 
 
-def field_sdf_grid(field, resolution: int, chunk: int = 262_144) -> tuple[np.ndarray, np.ndarray, float]:
-    """The field's SDF on a resolution^3 grid spanning its bounding cube: (values, origin, spacing)."""
+def field_sdf_grid(field, resolution: int, chunk: int = 262_144, narrow_band_stride: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
+    """The field's SDF on a resolution^3 grid spanning its bounding cube: (values, origin, spacing).
+    With a narrow-band stride the values are exact only where marching cubes can find the surface
+    (narrow_band.py: the same mesh for several times fewer network queries)."""
     device = device_of(field)
 
     @torch.no_grad()
     def sdf(points: np.ndarray) -> np.ndarray:
         return field.sdf(torch.from_numpy(points).to(device)[None])[0].float().cpu().numpy()
 
-    values, origin, spacing = sample_sdf_grid(sdf, resolution, float(field.radius), chunk)
+    if narrow_band_stride > 0:
+        band = sample_sdf_narrow_band(sdf, resolution, float(field.radius), chunk, stride=narrow_band_stride)
+        values, origin, spacing = band.values, band.origin, band.spacing
+    else:
+        values, origin, spacing = sample_sdf_grid(sdf, resolution, float(field.radius), chunk)
     if not np.isfinite(values).all():
         raise LirmUserError(f"the field's SDF has {int((~np.isfinite(values)).sum())} NaN or infinite values on the "
                             f"extraction grid; the reconstruction is broken: run the update again or use another checkpoint")
@@ -68,7 +76,7 @@ def extract_field_mesh(field, config: MeshExtractionConfig = MeshExtractionConfi
             progress(message, k, 3)
 
     stage("", f"sampling the SDF on a {config.resolution}^3 grid", 0)
-    values, origin, spacing = field_sdf_grid(field, config.resolution, config.chunk)
+    values, origin, spacing = field_sdf_grid(field, config.resolution, config.chunk, config.narrow_band_stride)
     check_has_surface(values)
     stage("sdf_grid", "marching cubes", 1)
     extracted = marching_cubes(values, origin, spacing)

@@ -51,10 +51,51 @@ class SurfaceCoverage:
 
     def seen_many(self, cameras: list[Camera]) -> list[np.ndarray]:
         """seen() for many cameras, their depth maps rendered in one batch."""
-        depths = self.rasterizer.depth_many(self.mesh, [self._small(c) for c in cameras])
-        return [self._seen_with(camera, depth) for camera, depth in zip(cameras, depths)]
+        small = [self._small(c) for c in cameras]
+        depths = self.rasterizer.depth_many(self.mesh, small)
+        seen: list[np.ndarray | None] = [None] * len(cameras)
+        # Pinhole cameras of one size (every candidate view) are tested together, the others one by one.
+        groups: dict[tuple[int, int], list[int]] = {}
+        for i, camera in enumerate(cameras):
+            if camera.distortion is None:
+                groups.setdefault((int(camera.width), int(camera.height)), []).append(i)
+            else:
+                seen[i] = self._seen_with(camera, depths[i])
+        for members in groups.values():
+            for i, row in zip(members, self._seen_pinhole([cameras[i] for i in members], np.stack([depths[i] for i in members]))):
+                seen[i] = row
+        return seen  # type: ignore[return-value]
+
+    def _seen_pinhole(self, cameras: list[Camera], depths: np.ndarray) -> np.ndarray:
+        """_seen_with for C undistorted cameras of one size at once: (C, N) bool."""
+        w2c = np.stack([np.linalg.inv(c.c2w) for c in cameras])  # (C, 4, 4)
+        local = np.matmul(self.points[None], w2c[:, :3, :3].transpose(0, 2, 1)) + w2c[:, None, :3, 3]  # (C, N, 3)
+        z = local[..., 2]
+        fx, fy, cx, cy = (np.array([getattr(c, k) for c in cameras])[:, None] for k in ("fx", "fy", "cx", "cy"))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = local[..., 0] / z * fx + cx
+            y = local[..., 1] / z * fy + cy
+            width, height = cameras[0].width, cameras[0].height
+            ok = (z > 1e-6) & (x >= 0) & (x < width) & (y >= 0) & (y < height)
+        # Within the angle: (center - p) . n >= cos * |center - p|, expanded into matrix products.
+        centers = np.stack([c.c2w[:3, 3] for c in cameras])  # (C, 3)
+        facing = centers @ self.normals.T - np.sum(self.points * self.normals, axis=1)[None]
+        distance = np.sqrt(np.maximum(np.sum(centers**2, axis=1)[:, None] - 2.0 * centers @ self.points.T
+                                      + np.sum(self.points**2, axis=1)[None], 0.0))
+        ok &= facing >= np.cos(np.radians(self.config.max_angle_deg)) * distance
+        c, n = np.nonzero(ok)
+        if len(c):
+            h, w = depths.shape[1:]
+            px = np.clip((x[c, n] * w / width).astype(int), 0, w - 1)
+            py = np.clip((y[c, n] * h / height).astype(int), 0, h - 1)
+            d = depths[c, py, px]
+            zn = z[c, n]
+            hidden = ~((d > 0) & (np.abs(zn - d) <= self.config.depth_tolerance * zn))
+            ok[c[hidden], n[hidden]] = False
+        return ok
 
     def _seen_with(self, camera: Camera, depth: np.ndarray) -> np.ndarray:
+        """One camera of any kind (lens distortion included) against its depth map."""
         xy, z = camera.project(self.points)
         with np.errstate(invalid="ignore"):
             ok = (z > 1e-6) & (xy[:, 0] >= 0) & (xy[:, 0] < camera.width) & (xy[:, 1] >= 0) & (xy[:, 1] < camera.height)
