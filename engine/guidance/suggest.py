@@ -1,9 +1,9 @@
 """`lirm suggest CAPTURE`: where to shoot next, for a capture as it stands.
 
 The surface is the latest reconstruction's mesh (marching cubes at a coarse grid), weighted by the
-model's uncertainty (uncertainty.py: change over the last two updates, view dependence, thin
-evidence), or, before any reconstruction, the object's bounding sphere (the capture is normalised so that the object fits the
-unit sphere), with a message saying so. Cameras are the capture's posed views in its normalised frame.
+model's uncertainty (uncertainty.py: change over the last two updates, view dependence, low
+opacity), or, before any reconstruction, the object's bounding sphere (the capture is normalised so
+that the object fits the unit sphere), with a message saying so. Cameras are the capture's posed views in its normalised frame.
 """
 
 from __future__ import annotations
