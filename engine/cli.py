@@ -203,6 +203,7 @@ def build_parser() -> argparse.ArgumentParser:
     bt.add_argument("--size", type=int, default=64, help="side of the protocol views in pixels (default 64)")
     bt.add_argument("--output-views", type=int, default=6, help="output views scored per object (default 6 of 12)")
     bt.add_argument("--mesh-resolution", type=int, default=48, help="marching-cubes grid for guidance and the Chamfer distance (default 48)")
+    bt.add_argument("--coverage-only", action="store_true", help="guided views by coverage alone, without the model's uncertainty (an ablation)")
     bt.add_argument("-o", "--out", type=Path, help="also write the table (.md) and the numbers (.json beside it)")
     bt.set_defaults(run=_run_bench_trajectory)
 
@@ -513,7 +514,7 @@ def _run_bench_trajectory(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     try:
         objects = synthetic_heldout(renderer, args.objects, args.size)
-        config = TrajectoryConfig(mesh_resolution=args.mesh_resolution,
+        config = TrajectoryConfig(mesh_resolution=args.mesh_resolution, uncertainty=not args.coverage_only,
                                   eval=EvalConfig(output_views=args.output_views, mesh_resolution=args.mesh_resolution))
         bar = _progress_bar(3 * len(objects), "trajectories")
         try:

@@ -92,6 +92,28 @@ def greedy_views(coverage: SurfaceCoverage, existing: list[Camera], candidates: 
     return chosen, gains, first
 
 
+def farthest_views(existing: list[Camera], candidates: list[Camera], k: int, exclude: tuple[int, ...] = ()) -> list[int]:
+    """Indices of k candidates chosen one after the other as the one whose viewing direction is the
+    farthest (largest smallest angle) from every view so far: where to shoot when no view adds
+    coverage any more, so that the photos keep spreading round the object instead of bunching."""
+    def direction(camera: Camera) -> np.ndarray:
+        d = camera.center - np.zeros(3)
+        return d / max(float(np.linalg.norm(d)), 1e-12)
+
+    taken = [direction(c) for c in existing] + [direction(candidates[i]) for i in exclude]
+    options = [i for i in range(len(candidates)) if i not in set(exclude)]
+    chosen = []
+    for _ in range(min(k, len(options))):
+        def nearest(i: int) -> float:
+            d = direction(candidates[i])
+            return min((float(d @ t) for t in taken), default=-1.0)  # the cosine to the closest view so far
+        best = min(options, key=nearest)
+        chosen.append(best)
+        options.remove(best)
+        taken.append(direction(candidates[best]))
+    return chosen
+
+
 def suggest_next_views(coverage: SurfaceCoverage, existing: list[Camera], k: int = 4,
                        weights: np.ndarray | None = None, config: CandidateConfig = CandidateConfig(),
                        seen_now: np.ndarray | None = None) -> tuple[list[Suggestion], np.ndarray]:

@@ -7,7 +7,8 @@ matters most). Updates 2 and 3 then take 4 more views each, chosen
 - sequentially: the next 4 in azimuth order (the supplementary's sequential trajectory);
 - at random: 4 of the remaining, seeded per object;
 - guided: greedily by next-view guidance on the current reconstruction (its mesh, weighted by the
-  model's uncertainty), restricted to the remaining pool views, as a photographer would be told.
+  model's uncertainty), restricted to the remaining pool views, as a photographer would be told;
+  once no view adds coverage, the rest as far as possible from every view so far.
 After each update the 12 output views are scored exactly as `lirm eval` scores them.
 """
 
@@ -25,7 +26,7 @@ from lirm.engine.evaluation.evaluate import (EvalConfig, EvalResult, model_devic
 from lirm.engine.evaluation.heldout_sets import HeldoutObject
 
 from .coverage import SurfaceCoverage
-from .next_views import camera_angles, greedy_views
+from .next_views import camera_angles, farthest_views, greedy_views
 from .suggest import field_surface
 from .uncertainty import guidance_weights, vertex_uncertainty
 
@@ -37,6 +38,7 @@ class TrajectoryConfig:
     updates: int = 3
     views_per_update: int = 4
     mesh_resolution: int = 48  # the guidance surface, as `lirm suggest` extracts it (coarse is enough)
+    uncertainty: bool = True  # guided views weigh coverage by the model's uncertainty (False: coverage alone)
     seed: int = 0
     eval: EvalConfig = field(default_factory=EvalConfig)
 
@@ -49,28 +51,30 @@ def azimuth_order(obj: HeldoutObject) -> list[int]:
 
 
 def guided_choice(gl, fields: list, obj: HeldoutObject, used: list[int], remaining: list[int], k: int,
-                  resolution: int = 48) -> list[int]:
+                  resolution: int = 48, uncertainty: bool = True) -> list[int]:
     mesh, _ = field_surface(fields[-1], resolution, face_budget=3000)  # no surface yet: the bounding sphere
-    weights = guidance_weights(vertex_uncertainty(fields, mesh.vertices, mesh.vertex_normals)["total"])
+    weights = (guidance_weights(vertex_uncertainty(fields, mesh.vertices, mesh.vertex_normals)["total"])
+               if uncertainty else None)
     coverage = SurfaceCoverage(gl, mesh.vertices, mesh.faces, mesh.vertex_normals)
     try:
         cameras = obj.views.cameras
         chosen, _, _ = greedy_views(coverage, [cameras[i] for i in used], [cameras[i] for i in remaining], k, weights)
     finally:
         coverage.release()
-    picks = [remaining[i] for i in chosen]
-    # Nothing left to gain (all covered): fill up in azimuth order, as a photographer would keep walking.
-    return picks + [i for i in remaining if i not in picks][:k - len(picks)]
+    # Nothing left to gain (all of the surface covered): the rest spread out, as far as possible from
+    # every view so far, instead of bunching next to them.
+    spread = farthest_views([cameras[i] for i in used], [cameras[i] for i in remaining], k - len(chosen), tuple(chosen))
+    return [remaining[i] for i in chosen + spread]
 
 
 def choose_views(strategy: str, gl, fields: list, obj: HeldoutObject, used: list[int], remaining: list[int], k: int,
-                 rng: np.random.Generator, resolution: int = 48) -> list[int]:
+                 rng: np.random.Generator, resolution: int = 48, uncertainty: bool = True) -> list[int]:
     if strategy == "sequential":
         return remaining[:k]
     if strategy == "random":
         return [remaining[i] for i in sorted(rng.choice(len(remaining), size=min(k, len(remaining)), replace=False))]
     if strategy == "guided":
-        return guided_choice(gl, fields, obj, used, remaining, k, resolution)
+        return guided_choice(gl, fields, obj, used, remaining, k, resolution, uncertainty)
     raise ValueError(f"unknown strategy {strategy!r}; choose one of {', '.join(STRATEGIES)}")
 
 
@@ -115,7 +119,7 @@ def run_trajectory_study(model, objects: list[HeldoutObject], gl, config: Trajec
                 if update > 1:
                     remaining = [i for i in order if i not in used]
                     batch = choose_views(strategy, gl, fields[-2:], obj, used, remaining, config.views_per_update, rng,
-                                         config.mesh_resolution)
+                                         config.mesh_resolution, config.uncertainty)
                     used = used + batch
                 else:
                     batch = used

@@ -71,3 +71,15 @@ def test_lirm_suggest_after_reconstruction_uses_the_mesh(lego_capture, tmp_path,
     out = capsys.readouterr().out
     assert "surface: reconstruction after update 2" in out
     assert "1. azimuth" in out
+
+
+def test_farthest_views_spread_round_the_object():
+    from lirm.engine.guidance.next_views import farthest_views
+
+    front = [orbit_camera(a, 20.0, 2.5, 64, 64, 50.0) for a in (-20.0, 0.0, 20.0)]
+    ring = [orbit_camera(a, 20.0, 2.5, 64, 64, 50.0) for a in range(0, 360, 30)]
+    first, second = farthest_views(front, ring, 2)
+    assert camera_angles(ring[first])[0] == 180.0  # straight behind
+    assert abs((camera_angles(ring[second])[0] - 180.0 + 180.0) % 360.0 - 180.0) >= 60.0  # not bunched next to it
+    assert 6 not in farthest_views(front, ring, 3, exclude=(6,))  # already chosen
+    assert farthest_views(front, ring[:2], 5) == [1, 0]  # no more than there are, 30° before 0°
