@@ -51,8 +51,7 @@ class SurfaceCoverage:
 
     def seen_many(self, cameras: list[Camera]) -> list[np.ndarray]:
         """seen() for many cameras, their depth maps rendered in one batch."""
-        small = [self._small(c) for c in cameras]
-        depths = self.rasterizer.depth_many(self.mesh, small)
+        depths = self.rasterizer.depth_many(self.mesh, [self._small(c) for c in cameras])
         seen: list[np.ndarray | None] = [None] * len(cameras)
         # Pinhole cameras of one size (every candidate view) are tested together, the others one by one.
         groups: dict[tuple[int, int], list[int]] = {}
@@ -75,7 +74,18 @@ class SurfaceCoverage:
         with np.errstate(divide="ignore", invalid="ignore"):
             x = local[..., 0] / z * fx + cx
             y = local[..., 1] / z * fy + cy
-            width, height = cameras[0].width, cameras[0].height
+        return self._visible(cameras, x, y, z, depths)
+
+    def _seen_with(self, camera: Camera, depth: np.ndarray) -> np.ndarray:
+        """One camera of any kind (lens distortion included) against its depth map."""
+        xy, z = camera.project(self.points)
+        return self._visible([camera], xy[None, :, 0], xy[None, :, 1], z[None], depth[None])[0]
+
+    def _visible(self, cameras: list[Camera], x: np.ndarray, y: np.ndarray, z: np.ndarray, depths: np.ndarray) -> np.ndarray:
+        """(C, N) bool from the points' pixel positions x, y and depths z in C cameras of one size: in
+        frame, in front, within the angle and matching the camera's depth map."""
+        width, height = cameras[0].width, cameras[0].height
+        with np.errstate(invalid="ignore"):
             ok = (z > 1e-6) & (x >= 0) & (x < width) & (y >= 0) & (y < height)
         # Within the angle: (center - p) . n >= cos * |center - p|, expanded into matrix products.
         centers = np.stack([c.c2w[:3, 3] for c in cameras])  # (C, 3)
@@ -92,23 +102,6 @@ class SurfaceCoverage:
             zn = z[c, n]
             hidden = ~((d > 0) & (np.abs(zn - d) <= self.config.depth_tolerance * zn))
             ok[c[hidden], n[hidden]] = False
-        return ok
-
-    def _seen_with(self, camera: Camera, depth: np.ndarray) -> np.ndarray:
-        """One camera of any kind (lens distortion included) against its depth map."""
-        xy, z = camera.project(self.points)
-        with np.errstate(invalid="ignore"):
-            ok = (z > 1e-6) & (xy[:, 0] >= 0) & (xy[:, 0] < camera.width) & (xy[:, 1] >= 0) & (xy[:, 1] < camera.height)
-        to_camera = camera.center[None, :] - self.points
-        to_camera /= np.maximum(np.linalg.norm(to_camera, axis=1, keepdims=True), 1e-12)
-        ok &= np.sum(to_camera * self.normals, axis=1) >= np.cos(np.radians(self.config.max_angle_deg))
-        if ok.any():
-            h, w = depth.shape
-            px = np.clip((xy[ok, 0] * w / camera.width).astype(int), 0, w - 1)
-            py = np.clip((xy[ok, 1] * h / camera.height).astype(int), 0, h - 1)
-            d = depth[py, px]
-            visible = (d > 0) & (np.abs(z[ok] - d) <= self.config.depth_tolerance * z[ok])
-            ok[np.nonzero(ok)[0][~visible]] = False
         return ok
 
     def covered(self, cameras: list[Camera]) -> np.ndarray:

@@ -97,8 +97,7 @@ def farthest_views(existing: list[Camera], candidates: list[Camera], k: int, exc
     farthest (largest smallest angle) from every view so far: where to shoot when no view adds
     coverage any more, so that the photos keep spreading round the object instead of bunching."""
     def direction(camera: Camera) -> np.ndarray:
-        d = camera.center - np.zeros(3)
-        return d / max(float(np.linalg.norm(d)), 1e-12)
+        return camera.center / max(float(np.linalg.norm(camera.center)), 1e-12)
 
     taken = [direction(c) for c in existing] + [direction(candidates[i]) for i in exclude]
     options = [i for i in range(len(candidates)) if i not in set(exclude)]
