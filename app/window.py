@@ -300,7 +300,9 @@ def runner_params(app: LirmApp):
     params.app_window_params.window_geometry.size = (app.config.width, app.config.height)
     params.imgui_window_params.default_imgui_window_type = hello_imgui.DefaultImGuiWindowType.provide_full_screen_dock_space
     params.imgui_window_params.show_status_bar = False
-    params.ini_filename = ""  # the layout is the code's; the user's choices live in the capture
+    # The layout is the code's and the user's choices live in the capture: no ini file. (An empty
+    # ini_filename is not enough: HelloImGui then names one after the window title, in the cwd.)
+    params.ini_disable = True
     params.fps_idling.fps_idle = 5.0  # an idle window redraws 5 times a second (jobs are polled then): little CPU on llvmpipe
 
     def split(new: str, direction, ratio: float, initial: str = "MainDockSpace"):

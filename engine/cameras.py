@@ -622,6 +622,73 @@ class Camera:
 
 
 # --------------------------------------------------------------------------------------------------
+# Cameras back from rays
+
+
+def _cross_matrices(v: np.ndarray) -> np.ndarray:
+    """(N, 3) -> (N, 3, 3): [v]x with [v]x @ u = v x u."""
+    z = np.zeros(len(v))
+    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], -1), np.stack([v[:, 2], z, -v[:, 0]], -1),
+                     np.stack([-v[:, 1], v[:, 0], z], -1)], axis=1)
+
+
+def camera_from_plucker(plucker: np.ndarray, tolerance_deg: float = 0.05, max_pixels: int = 4096) -> Camera:
+    """The pinhole camera whose pixel-centre rays are `plucker` (H, W, 6) [d, o x d]: the inverse of
+    `Camera.plucker()`, for code that is handed only what the network sees (a crop keeps its rays, so
+    a crop's camera comes back with its own intrinsics).
+
+    The centre o lies on every ray (o x d = m: linear in o, least squares). The directions are
+    M (x, y, 1) up to a positive scale with M = R K^-1 (d x M x = 0: linear in M, the smallest singular
+    vector), and the QR decomposition of M splits it into the rotation R and the upper-triangular K^-1.
+    Raises ValueError when no undistorted pinhole reproduces the rays to within `tolerance_deg`
+    (lens distortion, rays of several cameras, noise).
+    """
+    rays = np.asarray(plucker, np.float64)
+    if rays.ndim != 3 or rays.shape[-1] != 6 or rays.shape[0] < 2 or rays.shape[1] < 2:
+        raise ValueError(f"Plücker rays must have shape (H, W, 6) with H, W >= 2, got {rays.shape}")
+    h, w = rays.shape[:2]
+    stride = max(1, int(math.ceil(math.sqrt(h * w / max_pixels))))  # enough pixels for a 3x3 fit
+    ys, xs = np.mgrid[0:h:stride, 0:w:stride]
+    d, m = rays[ys, xs, :3].reshape(-1, 3), rays[ys, xs, 3:].reshape(-1, 3)
+    if not (np.isfinite(d).all() and np.isfinite(m).all()):
+        raise ValueError("Plücker rays contain NaN or inf")
+    norms = np.linalg.norm(d, axis=1, keepdims=True)
+    if norms.min() < 1e-9:
+        raise ValueError("Plücker rays contain zero directions")
+    d = d / norms
+    m = m / norms
+    cross_d = _cross_matrices(d)
+    centre = np.linalg.lstsq(cross_d.reshape(-1, 3), -m.reshape(-1), rcond=None)[0]  # d x o = -(o x d)
+    # Pixel centres, normalised for conditioning: xn = T x.
+    scale = 2.0 / max(w, h)
+    T = np.array([[scale, 0.0, -w * scale / 2], [0.0, scale, -h * scale / 2], [0.0, 0.0, 1.0]])
+    x = np.stack([xs.ravel() + 0.5, ys.ravel() + 0.5, np.ones(xs.size)], axis=-1) @ T.T
+    system = np.einsum("nij,nk->nijk", cross_d, x).reshape(-1, 9)  # rows of d x (Mn x) = 0 in vec(Mn)
+    M = np.linalg.svd(system, full_matrices=False)[2][-1].reshape(3, 3) @ T
+    if np.median(np.einsum("ij,nj,ni->n", M, x @ np.linalg.inv(T).T, d)) < 0:
+        M = -M  # the scale's sign: directions point forward, as the rays do
+    rotation, inverse_k = np.linalg.qr(M)
+    signs = np.sign(np.diag(inverse_k))
+    signs[signs == 0] = 1.0
+    rotation, inverse_k = rotation * signs, signs[:, None] * inverse_k
+    if np.linalg.det(rotation) < 0 or inverse_k[2, 2] <= 0:
+        raise ValueError("the rays are mirrored: no right-handed pinhole camera makes them")
+    K = np.linalg.inv(inverse_k / inverse_k[2, 2])
+    c2w = np.eye(4)
+    c2w[:3, :3], c2w[:3, 3] = rotation, centre
+    camera = Camera(w, h, K[0, 0], K[1, 1], K[0, 2], K[1, 2], c2w)
+    # The camera has no skew: check what it gives back against what it was made from.
+    o, back = camera.rays_at(np.stack([xs.ravel() + 0.5, ys.ravel() + 0.5], -1))
+    angle = np.degrees(np.arccos(np.clip(np.sum(back * d, axis=1), -1.0, 1.0)))
+    offset = np.linalg.norm(np.cross(o, d) - m, axis=1)  # how far the rays pass from the centre
+    size = max(float(np.linalg.norm(centre)), 1.0)
+    if angle.max() > tolerance_deg or offset.max() > np.radians(tolerance_deg) * size:
+        raise ValueError(f"the rays do not come from one pinhole camera (worst direction error {angle.max():.3f}°, "
+                         f"ray offset {offset.max():.2e}); undistorted crops of one photo do")
+    return camera
+
+
+# --------------------------------------------------------------------------------------------------
 # Orbits around a target (synthetic data, previews, guidance)
 
 

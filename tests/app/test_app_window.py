@@ -26,7 +26,8 @@ def _start_app(script: dict, folder: Path, display: str, env_extra: dict | None 
     script["out"] = str(folder / "out")
     path.write_text(json.dumps(script))
     env = dict(os.environ, DISPLAY=display, XDG_CONFIG_HOME=str(folder / "config"), **(env_extra or {}))
-    proc = subprocess.Popen(LIRM + ["app", "--new", "--script", str(path)], env=env, stdout=subprocess.PIPE,
+    # Run from the test's folder, so that anything the window writes into its working directory shows.
+    proc = subprocess.Popen(LIRM + ["app", "--new", "--script", str(path)], env=env, cwd=folder, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
     return proc, folder / "out" / "script_result.json"
 
@@ -127,6 +128,8 @@ def test_a_whole_session_in_the_window(tmp_path, x_display):
     # Reopening the capture finds the window's choices where they were left.
     saved = json.loads((capture / "app_state.json").read_text())
     assert saved["view"]["environment"] == "sky" and saved["view"]["channel"] == "beauty"
+    # The docking layout is the code's: the window leaves no imgui/HelloImGui .ini in its working directory.
+    assert not list(tmp_path.glob("*.ini")), list(tmp_path.glob("*.ini"))
 
 
 def test_bad_input_through_the_window(lego_capture, tmp_path, x_display):
