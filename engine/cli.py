@@ -148,7 +148,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--environments", type=Path, default=Path("../shared/data/envmaps"), help="HDR folder of the gltf set")
     ev.add_argument("--mesh-resolution", type=int, default=96, help="marching-cubes grid for the Chamfer distance (default 96)")
     ev.add_argument("--baselines", action="store_true",
-                    help="also score the untrained network of the same architecture and a sphere of the inputs' mean colour on the same views")
+                    help="also score, on the same views, the untrained network of the same architecture, a sphere of the inputs' "
+                         "mean colour and the carved visual hull coloured from the views (no learning)")
     ev.add_argument("-o", "--out", type=Path, help="also write the table (.md) and the numbers (.json beside it)")
     ev.set_defaults(run=_run_eval)
 
@@ -204,6 +205,13 @@ def build_parser() -> argparse.ArgumentParser:
     bt.add_argument("--output-views", type=int, default=6, help="output views scored per object (default 6 of 12)")
     bt.add_argument("--mesh-resolution", type=int, default=48, help="marching-cubes grid for guidance and the Chamfer distance (default 48)")
     bt.add_argument("--coverage-only", action="store_true", help="guided views by coverage alone, without the model's uncertainty (an ablation)")
+    bt.add_argument("--binary-coverage", action="store_true",
+                    help="guided views by binary coverage (seen within 60° or not) instead of viewing quality (an ablation)")
+    bt.add_argument("--reconstructor", choices=("lirm", "carved-hull"), default="lirm",
+                    help="what reconstructs: the LIRM model (default) or the carved visual hull coloured from the views, "
+                         "a reconstructor without learning whose quality comes only from the views it gets")
+    bt.add_argument("--input-size", type=int, default=64, help="the carved hull's input views in pixels (default 64, as the shipped tiny model's)")
+    bt.add_argument("--random-draws", type=int, default=5, help="random choices per object; random's score is their mean (default 5)")
     bt.add_argument("-o", "--out", type=Path, help="also write the table (.md) and the numbers (.json beside it)")
     bt.set_defaults(run=_run_bench_trajectory)
 
@@ -502,49 +510,81 @@ def _run_bench_trajectory(args: argparse.Namespace) -> int:
     from .evaluation.evaluate import EvalConfig
     from .evaluation.heldout_sets import synthetic_heldout
     from .evaluation.report import comparison_table
-    from .guidance.trajectory_study import TrajectoryConfig, guided_margin, run_trajectory_study
+    from .guidance.trajectory_study import (TrajectoryConfig, guided_margin, random_spread, run_trajectory_study,
+                                            share_of_draws_beaten)
     from .io.atomic_files import atomic_write, atomic_write_json
     from lirm.renderer.context import create_headless_context
     from lirm.renderer.pbr_renderer import PBRRenderer
 
-    _require_at_least_one(args, "objects", "size", "output_views", "mesh_resolution")
-    source = _model_with_warning(args.checkpoint)
+    _require_at_least_one(args, "objects", "size", "output_views", "mesh_resolution", "random_draws", "input_size")
+    if args.reconstructor == "carved-hull":
+        from .evaluation.carved_hull import CarvedHull
+
+        if args.checkpoint:
+            raise LirmUserError("the carved hull has no weights: drop the checkpoint, or use --reconstructor lirm")
+        reconstructor, description = CarvedHull(args.input_size), f"the carved visual hull ({args.input_size} px inputs)"
+    else:
+        source = _model_with_warning(args.checkpoint)
+        reconstructor, description = source.model, source.description
     ctx = create_headless_context()
     renderer = PBRRenderer(ctx)
     start = time.perf_counter()
     try:
         objects = synthetic_heldout(renderer, args.objects, args.size)
         config = TrajectoryConfig(mesh_resolution=args.mesh_resolution, uncertainty=not args.coverage_only,
+                                  random_draws=args.random_draws, graded=not args.binary_coverage,
                                   eval=EvalConfig(output_views=args.output_views, mesh_resolution=args.mesh_resolution))
-        bar = _progress_bar(3 * len(objects), "trajectories")
+        bar = _progress_bar((2 + args.random_draws) * len(objects), "trajectories")
         try:
-            results = run_trajectory_study(source.model, objects, ctx, config, progress=_bar_updater(bar))
+            results = run_trajectory_study(reconstructor, objects, ctx, config, progress=_bar_updater(bar))
         finally:
             bar.close()
     finally:
         renderer.release()
         ctx.release()
-    table = comparison_table([(name, r.scores) for name, r in results.items()], f"Camera trajectories, {source.description}: update 1 = the first 4 views "
-                                                    f"in azimuth order for all; updates 2-3 chosen by each strategy")
-    margin = guided_margin(results, "random")
+    table = comparison_table([(name, r.scores) for name, r in results.items()],
+                             f"Camera trajectories, {description}, {len(objects)} objects: update 1 = the first 4 views in "
+                             f"azimuth order for all; updates 2-3 chosen by each strategy (random: the mean of "
+                             f"{args.random_draws} draws per object)")
+    updates = len(results["guided"].coverage)
     lines = ["", "Share of the true surface seen within 60° by the inputs so far:", "",
-             "| strategy | " + " | ".join(f"after update {u + 1}" for u in range(len(results["guided"].coverage))) + " |",
-             "|---|" + "---|" * len(results["guided"].coverage)]
+             "| strategy | " + " | ".join(f"after update {u + 1}" for u in range(updates)) + " |", "|---|" + "---|" * updates]
     lines += [f"| {name} | " + " | ".join(f"{100 * c:.1f}%" for c in r.coverage) + " |" for name, r in results.items()]
-    lines += ["", "Guided minus random (positive = guided better; CD: random minus guided):", "",
-              "| after update | PSNR | SSIM | albedo PSNR | roughness PSNR | metallic PSNR | CD | coverage |",
-              "|---|---|---|---|---|---|---|---|"]
-    fmt = lambda v, d: "—" if v is None else f"{v:+.{d}f}"  # noqa: E731
-    for m in margin:
-        lines.append(f"| {m['update']} | {fmt(m['psnr'], 2)} | {fmt(m['ssim'], 3)} | {fmt(m['albedo_psnr'], 2)} | "
-                     f"{fmt(m['roughness_psnr'], 2)} | {fmt(m['metallic_psnr'], 2)} | {fmt(m['chamfer'], 4)} | "
-                     f"{fmt(None if m['coverage'] is None else 100 * m['coverage'], 1)} pts |")
+    margins = {against: guided_margin(results, against) for against in ("random", "sequential")}
+    lines += ["", "Guided minus each other strategy, object by object: the mean difference [95% interval] and the "
+                  "verdict (positive = guided better; CD: the other minus guided; coverage in points):", "",
+              "| against | after update | PSNR | SSIM | albedo PSNR | CD | coverage |", "|---|---|---|---|---|---|---|"]
+
+    def cell(d, digits: int, scale: float = 1.0) -> str:
+        if d is None:
+            return "—"
+        return f"{scale * d.mean:+.{digits}f} [{scale * d.low:+.{digits}f}, {scale * d.high:+.{digits}f}] {d.verdict}"
+
+    for against, rows in margins.items():
+        for m in rows[1:]:  # update 1 is the same views for all
+            i = m["intervals"]
+            lines.append(f"| {against} | {m['update']} | {cell(i['psnr'], 2)} | {cell(i['ssim'], 3)} | {cell(i['albedo'], 2)} | "
+                         f"{cell(i['chamfer'], 4)} | {cell(i['coverage'], 1, 100)} |")
+    spread = random_spread(results["random"])
+    beaten = share_of_draws_beaten(results["guided"], results["random"])
+    if args.random_draws > 1:
+        lines += ["", "One random draw alone: PSNR standard deviation across draws, mean over objects, after update "
+                  + ", ".join(f"{u + 1}: {v:.3f} dB" for u, v in enumerate(spread) if v is not None and u > 0) + "."]
+    lines += ["Guided's PSNR is above " + ", ".join(f"{100 * v:.0f}% (update {u + 1})" for u, v in enumerate(beaten)
+                                                  if v is not None and u > 0) + " of the random draws."]
     table += "\n".join(lines) + f"\n\n{time.perf_counter() - start:.0f} s in all.\n"
     print(table)
     if args.out:
+        def margin_json(rows):
+            return [{"update": m["update"], **{k: (None if d is None else d.to_dict()) for k, d in m["intervals"].items()}}
+                    for m in rows]
+
         atomic_write(args.out, lambda tmp: tmp.write_text(table, encoding="utf-8"))
-        atomic_write_json(args.out.with_suffix(".json"), {"weights": source.description, "margin_vs_random": margin,
-                                                          **{name: {**r.scores.to_dict(), "coverage": r.coverage} for name, r in results.items()}})
+        atomic_write_json(args.out.with_suffix(".json"), {
+            "reconstructor": description, "random_draws": args.random_draws,
+            "margin": {against: margin_json(rows) for against, rows in margins.items()},
+            "random_psnr_spread": spread, "guided_above_random_draws": beaten,
+            **{name: {**r.scores.to_dict(), "coverage": r.coverage, "per_object": r.per_object} for name, r in results.items()}})
     return 0
 
 
@@ -653,6 +693,7 @@ def _run_train(args: argparse.Namespace) -> int:
 
 def _run_eval(args: argparse.Namespace) -> int:
     from .evaluation.baselines import MeanColourSphere, untrained_model
+    from .evaluation.carved_hull import CarvedHull
     from .evaluation.evaluate import EvalConfig, evaluate_heldout
     from .evaluation.report import comparison_table, markdown_table
     from .io.atomic_files import atomic_write, atomic_write_json
@@ -668,7 +709,8 @@ def _run_eval(args: argparse.Namespace) -> int:
     contenders = [(label, model)]
     if args.baselines:
         contenders += [(f"untrained '{model.config.name}' (seed 0)", untrained_model(model.config)),
-                       ("mean-colour sphere", MeanColourSphere(model.config.image_size, model.config.radius))]
+                       ("mean-colour sphere", MeanColourSphere(model.config.image_size, model.config.radius)),
+                       ("carved visual hull", CarvedHull(model.config.image_size, radius=model.config.radius))]
     results = []
     for name, reconstructor in contenders:
         bar = _progress_bar(len(objects), f"evaluating {name}")

@@ -80,16 +80,18 @@ class CarvedHull:
         images = views.image[0].permute(0, 2, 3, 1).float().cpu().numpy()  # (V, H, W, 3) sRGB
         backgrounds = views.image_bg[0].permute(0, 2, 3, 1).float().cpu().numpy()
         rays = views.plucker[0].permute(0, 2, 3, 1).double().cpu().numpy()
-        c = self.config
-        occupancy = _ball(c.resolution, c.radius) if state.occupancy is None else state.occupancy.copy()
-        hull = VoxelHull(occupancy, c.radius)
         seen = []
         for v in range(len(images)):
             mask = object_mask(images[v], backgrounds[v]) > 0
             if mask.any():  # a view without the object says nothing about where it is
-                camera = camera_from_plucker(rays[v])
-                _carve(hull, camera, mask)
-                seen.append((camera, images[v], mask))
+                seen.append((camera_from_plucker(rays[v]), images[v], mask))
+        if not seen:
+            return CarvedHullState(state.occupancy, state.colour_sum, state.weight, state.updates + 1)
+        c = self.config
+        occupancy = _ball(c.resolution, c.radius) if state.occupancy is None else state.occupancy.copy()
+        hull = VoxelHull(occupancy, c.radius)
+        for camera, _, mask in seen:
+            _carve(hull, camera, mask)
         colour_sum, weight = state.colour_sum.copy(), state.weight.copy()
         for camera, image, mask in seen:
             self._add_colour(hull, camera, image, mask, colour_sum, weight)

@@ -51,6 +51,13 @@ class SurfaceCoverage:
 
     def seen_many(self, cameras: list[Camera]) -> list[np.ndarray]:
         """seen() for many cameras, their depth maps rendered in one batch."""
+        return [c > 0 for c in self.view_cosines(cameras)]
+
+    def view_cosines(self, cameras: list[Camera]) -> np.ndarray:
+        """(C, N) how squarely each camera sees each point: the cosine between the point's normal and
+        its direction to the camera where the camera sees it well (at least cos 60° = 0.5), else 0."""
+        if not cameras:
+            return np.zeros((0, len(self.points)))
         depths = self.rasterizer.depth_many(self.mesh, [self._small(c) for c in cameras])
         seen: list[np.ndarray | None] = [None] * len(cameras)
         # Pinhole cameras of one size (every candidate view) are tested together, the others one by one.
@@ -63,10 +70,10 @@ class SurfaceCoverage:
         for members in groups.values():
             for i, row in zip(members, self._seen_pinhole([cameras[i] for i in members], np.stack([depths[i] for i in members]))):
                 seen[i] = row
-        return seen  # type: ignore[return-value]
+        return np.stack(seen)  # type: ignore[arg-type]
 
     def _seen_pinhole(self, cameras: list[Camera], depths: np.ndarray) -> np.ndarray:
-        """_seen_with for C undistorted cameras of one size at once: (C, N) bool."""
+        """_seen_with for C undistorted cameras of one size at once: (C, N) cosines."""
         w2c = np.stack([np.linalg.inv(c.c2w) for c in cameras])  # (C, 4, 4)
         local = np.matmul(self.points[None], w2c[:, :3, :3].transpose(0, 2, 1)) + w2c[:, None, :3, 3]  # (C, N, 3)
         z = local[..., 2]
@@ -82,8 +89,9 @@ class SurfaceCoverage:
         return self._visible([camera], xy[None, :, 0], xy[None, :, 1], z[None], depth[None])[0]
 
     def _visible(self, cameras: list[Camera], x: np.ndarray, y: np.ndarray, z: np.ndarray, depths: np.ndarray) -> np.ndarray:
-        """(C, N) bool from the points' pixel positions x, y and depths z in C cameras of one size: in
-        frame, in front, within the angle and matching the camera's depth map."""
+        """(C, N) viewing cosines, 0 where not seen, from the points' pixel positions x, y and depths z in
+        C cameras of one size: seen means in frame, in front, within the angle and matching the
+        camera's depth map."""
         width, height = cameras[0].width, cameras[0].height
         with np.errstate(invalid="ignore"):
             ok = (z > 1e-6) & (x >= 0) & (x < width) & (y >= 0) & (y < height)
@@ -92,7 +100,8 @@ class SurfaceCoverage:
         facing = centers @ self.normals.T - np.sum(self.points * self.normals, axis=1)[None]
         distance = np.sqrt(np.maximum(np.sum(centers**2, axis=1)[:, None] - 2.0 * centers @ self.points.T
                                       + np.sum(self.points**2, axis=1)[None], 0.0))
-        ok &= facing >= np.cos(np.radians(self.config.max_angle_deg)) * distance
+        cosine = facing / np.maximum(distance, 1e-12)
+        ok &= cosine >= np.cos(np.radians(self.config.max_angle_deg))
         c, n = np.nonzero(ok)
         if len(c):
             h, w = depths.shape[1:]
@@ -102,14 +111,11 @@ class SurfaceCoverage:
             zn = z[c, n]
             hidden = ~((d > 0) & (np.abs(zn - d) <= self.config.depth_tolerance * zn))
             ok[c[hidden], n[hidden]] = False
-        return ok
+        return np.where(ok, cosine, 0.0)
 
     def covered(self, cameras: list[Camera]) -> np.ndarray:
         """(N,) how many of the cameras see each point well."""
-        count = np.zeros(len(self.points), np.int32)
-        for seen in self.seen_many(cameras):
-            count += seen
-        return count
+        return (self.view_cosines(cameras) > 0).sum(axis=0).astype(np.int32)
 
     def release(self) -> None:
         self.mesh.release()

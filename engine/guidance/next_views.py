@@ -2,8 +2,9 @@
 
 Candidates: elevations -10..80 degrees, every `azimuth_step` degrees, at the capture's typical
 distance and field of view (what a photographer walking round the object can reach). Each candidate
-is worth the weighted area of the surface it would newly cover; the best is taken, its points count
-as covered, and the next is chosen the same way. Weights default to 1 (pure coverage); the model's
+is worth how much it would raise the viewing quality of the (weighted) surface: newly covered
+points first, then points seen only obliquely so far; the best is taken, and the next is chosen
+the same way on what it leaves. Weights default to 1 (pure coverage); the model's
 uncertainty can raise them where the reconstruction is unsure.
 """
 
@@ -31,7 +32,7 @@ class Suggestion:
     elevation_deg: float
     distance: float
     look_at: tuple[float, float, float]
-    gain: float  # share of the (weighted) surface this view newly covers
+    gain: float  # the rise in (weighted) viewing quality this view brings, as a share of the surface (greedy_views)
     sentence: str
     camera: Camera
 
@@ -71,24 +72,39 @@ def describe_move(from_azimuth: float, from_elevation: float, to_azimuth: float,
 
 
 def greedy_views(coverage: SurfaceCoverage, existing: list[Camera], candidates: list[Camera], k: int,
-                 weights: np.ndarray | None = None, seen_now: np.ndarray | None = None) -> tuple[list[int], list[float], np.ndarray]:
-    """Indices of the k candidates that add the most weighted coverage, chosen one after the other,
-    their gains (shares of the weighted surface), and every candidate's gain before any choice.
-    `seen_now`: coverage.covered(existing), when the caller has it already."""
+                 weights: np.ndarray | None = None, quality_now: np.ndarray | None = None,
+                 graded: bool = True) -> tuple[list[int], list[float], np.ndarray]:
+    """Indices of the k candidates that add the most, chosen one after the other, their gains, and
+    every candidate's gain before any choice.
+
+    A point's quality is how squarely the best camera so far sees it: its viewing cosine, at least
+    0.5 (60°) when covered, 0 when not. A candidate is worth the weighted rise in quality it brings,
+    as a share of the weighted surface: a newly covered point adds its cosine (0.5-1), a point seen
+    only obliquely so far adds the difference. So new coverage comes first, and once the surface is
+    covered the next views still go where it is seen worst. `graded=False`: binary coverage (a point
+    seen within 60° counts as done; the gain is the share of the surface newly covered).
+    `quality_now`: coverage.view_cosines(existing).max(axis=0), when the caller has it already."""
     weights = np.ones(len(coverage.points)) if weights is None else np.asarray(weights, np.float64)
     total = float(weights.sum()) or 1.0
-    covered = (coverage.covered(existing) if seen_now is None else np.asarray(seen_now)) > 0
-    seen = coverage.seen_many(candidates)
-    first = np.array([float(weights[s & ~covered].sum()) / total for s in seen])
+    now = coverage.view_cosines(existing).max(axis=0, initial=0.0) if quality_now is None else np.asarray(quality_now, np.float64)
+    looks = coverage.view_cosines(candidates)  # (C, N)
+    if not graded:
+        now, looks = (now > 0).astype(np.float64), (looks > 0).astype(np.float64)
+
+    def gains_now() -> np.ndarray:
+        return np.maximum(looks - now[None], 0.0) @ weights / total if len(looks) else np.zeros(0)
+
+    first = gains_now()
     chosen, gains = [], []
-    for _ in range(k):
-        gain = [float(weights[s & ~covered].sum()) / total if i not in chosen else -1.0 for i, s in enumerate(seen)]
-        best = int(np.argmax(gain)) if gain else -1
-        if best < 0 or gain[best] <= 0:
+    for _ in range(min(k, len(candidates))):
+        gain = gains_now()
+        gain[chosen] = -1.0
+        best = int(np.argmax(gain))
+        if gain[best] <= 1e-9:
             break
         chosen.append(best)
-        gains.append(gain[best])
-        covered |= seen[best]
+        gains.append(float(gain[best]))
+        now = np.maximum(now, looks[best])
     return chosen, gains, first
 
 
@@ -115,10 +131,10 @@ def farthest_views(existing: list[Camera], candidates: list[Camera], k: int, exc
 
 def suggest_next_views(coverage: SurfaceCoverage, existing: list[Camera], k: int = 4,
                        weights: np.ndarray | None = None, config: CandidateConfig = CandidateConfig(),
-                       seen_now: np.ndarray | None = None) -> tuple[list[Suggestion], np.ndarray]:
+                       quality_now: np.ndarray | None = None) -> tuple[list[Suggestion], np.ndarray]:
     """The next k views (greedy) and every candidate's initial gain as a (elevations, azimuths) heat map."""
     candidates = candidate_cameras(existing, config)
-    chosen, gains, first = greedy_views(coverage, existing, [camera for _, _, camera in candidates], k, weights, seen_now)
+    chosen, gains, first = greedy_views(coverage, existing, [camera for _, _, camera in candidates], k, weights, quality_now)
     azimuths = np.arange(0.0, 360.0, config.azimuth_step_deg)
     heat_map = first.reshape(len(config.elevations_deg), len(azimuths))
     last = camera_angles(existing[-1]) if existing else (0.0, 20.0, 2.5)

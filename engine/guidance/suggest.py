@@ -117,10 +117,11 @@ def suggest_for_capture(renderer, capture_dir: str | Path, k: int = 4, checkpoin
         notes.append("all views were taken from about the same spot: walk round the object")
     coverage = occluding_coverage(renderer, mesh, occluder_faces)
     try:
-        vertex_coverage = coverage.covered(cameras)
+        looks = coverage.view_cosines(cameras)
+        vertex_coverage = (looks > 0).sum(axis=0).astype(np.int32)
         clock.lap("coverage")
         suggestions, heat = suggest_next_views(coverage, cameras, k, weights=weights, config=CandidateConfig(),
-                                               seen_now=vertex_coverage)
+                                               quality_now=looks.max(axis=0))
         clock.lap("candidates")
         after = coverage.covered(cameras + [s.camera for s in suggestions])
     finally:

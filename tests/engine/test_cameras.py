@@ -12,6 +12,7 @@ import pytest
 from lirm.engine.cameras import (
     Camera,
     c2w_to_colmap,
+    camera_from_plucker,
     colmap_to_c2w,
     distance_to_cover_sphere,
     focal_to_fov,
@@ -281,6 +282,36 @@ def test_plucker_moment():
     # The moment is a property of the line, not of the point chosen on it.
     p = o + 3.7 * d
     np.testing.assert_allclose(plucker_rays(p, d), plucker_rays(o, d), atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_camera_from_plucker_inverts_plucker(seed):
+    cam = make_camera(seed=seed)
+    # A crop that is off-centre, anisotropic and partly outside the photo keeps its rays: its own camera comes back.
+    for c in (cam, cam.crop_resize(10.3, -5.7, 27.9, 40.4, 16, 24), orbit_camera(200, 35, 2.4, 64, 64, 50.0)):
+        back = camera_from_plucker(c.plucker())
+        assert (back.width, back.height) == (c.width, c.height)
+        np.testing.assert_allclose([back.fx, back.fy, back.cx, back.cy], [c.fx, c.fy, c.cx, c.cy], rtol=1e-4, atol=1e-3)
+        np.testing.assert_allclose(back.c2w, c.c2w, atol=1e-5)
+
+
+def test_camera_from_plucker_refuses_rays_no_pinhole_makes():
+    cam = make_camera()
+    with pytest.raises(ValueError, match="pinhole"):
+        camera_from_plucker(make_camera(DIST5).plucker())  # a real lens bends the rays
+    mixed = cam.plucker().copy()
+    mixed[:, 32:] = make_camera(seed=5).plucker()[:, 32:]  # half of the image from another camera
+    with pytest.raises(ValueError, match="pinhole"):
+        camera_from_plucker(mixed)
+    mirrored = cam.plucker()[:, ::-1]
+    with pytest.raises(ValueError, match="mirrored|pinhole"):
+        camera_from_plucker(mirrored)
+    broken = cam.plucker().copy()
+    broken[3, 4, 0] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        camera_from_plucker(broken)
+    with pytest.raises(ValueError, match="shape"):
+        camera_from_plucker(cam.plucker()[0])
 
 
 # ---- crop / resize -------------------------------------------------------------------------

@@ -27,10 +27,14 @@ def test_batched_visibility_equals_one_camera_at_a_time(renderer):
         front = [orbit_camera(a, 20.0, 2.5, 96, 96, 50.0) for a in (-30.0, 0.0, 30.0)]
         distorted = dataclasses.replace(orbit_camera(90.0, 10.0, 2.5, 96, 96, 50.0), distortion=np.array([-0.1, 0.02, 0.0, 0.0]))
         cameras = [c for _, _, c in candidate_cameras(front)] + [distorted, orbit_camera(10.0, 0.0, 2.0, 128, 96, 60.0)]
-        batched = coverage.seen_many(cameras)
+        cosines = coverage.view_cosines(cameras)
         one_by_one = [coverage._seen_with(c, coverage.depth_map(c)) for c in cameras]
-        for camera, a, b in zip(cameras, batched, one_by_one):
-            np.testing.assert_array_equal(a, b)
+        for camera, a, b in zip(cameras, cosines, one_by_one):
+            np.testing.assert_allclose(a, b, atol=1e-12)
+        # A point seen well is seen within 60 degrees: cosine 0.5-1; unseen is 0.
+        assert set(np.unique(cosines[(cosines > 0) & (cosines < 0.5)])) == set() and cosines.max() <= 1.0 + 1e-9
+        batched = coverage.seen_many(cameras)
+        assert all(np.array_equal(s, c > 0) for s, c in zip(batched, cosines))
         # Occlusion matters here: from azimuth 0 (camera on -y) the big sphere hides the small one on +y;
         # from azimuth 180 it is in plain view.
         small = np.arange(len(mesh.vertices)) >= len(trimesh.creation.icosphere(3, radius=0.5).vertices)

@@ -5,7 +5,7 @@ import trimesh
 
 from lirm.engine.cameras import orbit_camera
 from lirm.engine.guidance.coverage import SurfaceCoverage
-from lirm.engine.guidance.next_views import camera_angles, describe_move, suggest_next_views
+from lirm.engine.guidance.next_views import camera_angles, describe_move, greedy_views, suggest_next_views
 
 
 def test_camera_angles_invert_orbit_camera():
@@ -83,3 +83,22 @@ def test_farthest_views_spread_round_the_object():
     assert abs((camera_angles(ring[second])[0] - 180.0 + 180.0) % 360.0 - 180.0) >= 60.0  # not bunched next to it
     assert 6 not in farthest_views(front, ring, 3, exclude=(6,))  # already chosen
     assert farthest_views(front, ring[:2], 5) == [1, 0]  # no more than there are, 30° before 0°
+
+
+def test_once_all_is_covered_the_next_view_goes_where_it_is_seen_most_obliquely(renderer):
+    """Six cameras on the axes see every point of a sphere within 55°: binary coverage has nothing
+    left to gain, but the corner directions are seen only at about 55°, and a corner camera sees them
+    head-on."""
+    sphere = trimesh.creation.icosphere(3, radius=0.6)
+    coverage = SurfaceCoverage(renderer, sphere.vertices, sphere.faces, sphere.vertex_normals)
+    try:
+        axes = [orbit_camera(a, 0.0, 3.0, 96, 96, 40.0) for a in (0, 90, 180, 270)] + \
+               [orbit_camera(0, e, 3.0, 96, 96, 40.0) for e in (90, -90)]
+        assert (coverage.covered(axes) > 0).all()
+        candidates = [orbit_camera(90, 0.0, 3.0, 96, 96, 40.0), orbit_camera(135, 35.26, 3.0, 96, 96, 40.0)]
+        chosen, gains, first = greedy_views(coverage, axes, candidates, 2)
+        assert chosen[0] == 1 and first[0] < 1e-6 < first[1]  # the axis camera again adds nothing
+        binary, _, first_binary = greedy_views(coverage, axes, candidates, 2, graded=False)
+        assert binary == [] and np.all(first_binary == 0)
+    finally:
+        coverage.release()

@@ -2,16 +2,20 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import torch
 import trimesh
 
+from lirm.engine.evaluation.carved_hull import CarvedHull
 from lirm.engine.evaluation.evaluate import EvalConfig
 from lirm.engine.evaluation.heldout_sets import synthetic_heldout
 from lirm.engine.guidance.coverage import SurfaceCoverage
 from lirm.engine.guidance.next_views import camera_angles, suggest_next_views
-from lirm.engine.guidance.trajectory_study import TrajectoryConfig, azimuth_order, guided_margin, run_trajectory_study
+from lirm.engine.guidance.trajectory_study import (TrajectoryConfig, azimuth_order, guided_margin, random_spread,
+                                                   run_trajectory_study, share_of_draws_beaten)
 from lirm.engine.model.config import preset
 from lirm.engine.model.lirm import LIRM
 from lirm.engine.model.volume_renderer import VolumeRenderConfig
@@ -44,8 +48,9 @@ def test_front_views_of_heldout_objects_send_the_photographer_round_the_back(hel
 def test_trajectory_study_compares_strategies_on_the_same_first_update(heldout, gl_context):
     torch.manual_seed(0)  # an untrained model's mesh steers guidance: the same one on every run
     torch_model = LIRM(preset("tiny"))
-    config = TrajectoryConfig(mesh_resolution=20, eval=EvalConfig(render=VolumeRenderConfig(samples_per_ray=24, numerical_normals=False),
-                                                                  mesh_resolution=20, chamfer_points=300, output_views=1))
+    config = TrajectoryConfig(mesh_resolution=20, random_draws=2,
+                              eval=EvalConfig(render=VolumeRenderConfig(samples_per_ray=24, numerical_normals=False),
+                                              mesh_resolution=20, chamfer_points=300, output_views=1))
     results = run_trajectory_study(torch_model, heldout[:1], gl_context, config)
     assert set(results) == {"guided", "random", "sequential"}
     firsts = [r.scores.rows[0] for r in results.values()]
@@ -57,3 +62,42 @@ def test_trajectory_study_compares_strategies_on_the_same_first_update(heldout, 
     assert results["guided"].coverage[1] >= results["random"].coverage[1]
     margin = guided_margin(results)
     assert margin[0]["coverage"] == 0 and margin[1]["coverage"] >= 0
+    # Every run is kept: one per object for guided and sequential, one per draw for random, and random's
+    # per-object score is the mean of its draws.
+    assert [len(d) for d in results["random"].per_draw["psnr"][2]] == [2]
+    assert [len(d) for d in results["guided"].per_draw["psnr"][2]] == [1]
+    draws = results["random"].per_draw["psnr"][2][0]
+    assert results["random"].per_object["psnr"][2][0] == pytest.approx(float(np.mean(draws)))
+    assert margin[2]["psnr"] == pytest.approx(results["guided"].per_object["psnr"][2][0] - float(np.mean(draws)))
+    assert margin[2]["intervals"]["psnr"].verdict == "within noise"  # one object decides nothing
+    assert len(random_spread(results["random"])) == 3 and 0 <= share_of_draws_beaten(results["guided"], results["random"])[2] <= 1
+
+
+def test_with_a_reconstructor_that_follows_its_views_guidance_sees_more(heldout, gl_context):
+    """The carved hull's shape and colour come only from its views; guided views see more of the true
+    surface than random ones, and the study scores it like LIRM."""
+    config = TrajectoryConfig(mesh_resolution=24, random_draws=2,
+                              eval=EvalConfig(render=VolumeRenderConfig(samples_per_ray=32, numerical_normals=False),
+                                              mesh_resolution=24, chamfer_points=300, output_views=2))
+    results = run_trajectory_study(CarvedHull(image_size=32, resolution=32), heldout, gl_context, config)
+    for r in results.values():
+        assert r.scores.rows[2].chamfer < r.scores.rows[0].chamfer  # more views, a tighter hull, whatever chose them
+    assert results["guided"].coverage[1] >= results["random"].coverage[1]
+    assert results["guided"].coverage[1] > results["sequential"].coverage[1]
+
+
+@pytest.mark.slow
+def test_lirm_bench_trajectory_reports_intervals(tmp_path, capsys):
+    from lirm.engine.cli import main
+
+    out = tmp_path / "study.md"
+    assert main(["bench", "trajectory", "--reconstructor", "carved-hull", "--input-size", "32", "--objects", "2", "--size", "32",
+                 "--output-views", "1", "--mesh-resolution", "20", "--random-draws", "2", "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "Guided minus each other strategy" in text and "the carved visual hull (32 px inputs)" in text
+    data = json.loads(out.with_suffix(".json").read_text())
+    assert data["random_draws"] == 2 and set(data["margin"]) == {"random", "sequential"}
+    assert data["margin"]["random"][1]["psnr"]["verdict"] in ("wins", "loses", "within noise")
+    assert len(data["guided"]["per_object"]["psnr"][0]) == 2
+    assert main(["bench", "trajectory", "some.safetensors", "--reconstructor", "carved-hull"]) == 2
+    assert "no weights" in capsys.readouterr().err
