@@ -494,7 +494,7 @@ def _run_suggest(args: argparse.Namespace) -> int:
           f"after these shots {100 * result.coverage_after:.0f}%")
     for n, s in enumerate(result.suggestions, start=1):
         print(f"{n}. azimuth {s.azimuth_deg:.0f}°, elevation {s.elevation_deg:.0f}°, distance {s.distance:.2f}: "
-              f"{s.sentence} (+{100 * s.gain:.0f}% of the surface)")
+              f"{s.sentence} ({_shot_worth(s.new_coverage)})")
     if not result.suggestions:
         print("the surface is covered from every reachable angle: no more views needed")
     heat_path = args.heat_map or args.capture / "guidance" / "heat_map.png"
@@ -502,6 +502,13 @@ def _run_suggest(args: argparse.Namespace) -> int:
     files = write_guidance(args.capture / "guidance", result)
     print(f"for the app: {files['suggestions']} and {files['coverage']} (per-vertex coverage)")
     return 0
+
+
+def _shot_worth(new_coverage: float) -> str:
+    """What a suggested shot brings, in the photographer's terms."""
+    if new_coverage >= 0.005:
+        return f"+{100 * new_coverage:.0f}% of the surface newly covered"
+    return "a squarer look at parts seen only at a slant so far"
 
 
 def _run_bench_trajectory(args: argparse.Namespace) -> int:

@@ -37,7 +37,7 @@ class GuidancePanel:
             imgui.text_wrapped(f"note: {note}")
         for s in g["suggestions"]:
             imgui.bullet_text(f"{s['rank']}. {s['sentence']} (azimuth {s['azimuth_deg']:.0f}°, elevation "
-                              f"{s['elevation_deg']:.0f}°, +{100 * s['gain']:.0f}%)")
+                              f"{s['elevation_deg']:.0f}°, +{100 * s.get('new_coverage', s['gain']):.0f}% new)")
         if "heat_map" in g:
             self._view_sphere(g)
 

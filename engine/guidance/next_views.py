@@ -32,7 +32,8 @@ class Suggestion:
     elevation_deg: float
     distance: float
     look_at: tuple[float, float, float]
-    gain: float  # the rise in (weighted) viewing quality this view brings, as a share of the surface (greedy_views)
+    gain: float  # the rise in (weighted) viewing quality this view brings, as a share of the surface (choose_greedily)
+    new_coverage: float  # share of the surface it newly covers (seen within 60°), after the suggestions before it
     sentence: str
     camera: Camera
 
@@ -75,28 +76,36 @@ def greedy_views(coverage: SurfaceCoverage, existing: list[Camera], candidates: 
                  weights: np.ndarray | None = None, quality_now: np.ndarray | None = None,
                  graded: bool = True) -> tuple[list[int], list[float], np.ndarray]:
     """Indices of the k candidates that add the most, chosen one after the other, their gains, and
-    every candidate's gain before any choice.
-
-    A point's quality is how squarely the best camera so far sees it: its viewing cosine, at least
-    0.5 (60°) when covered, 0 when not. A candidate is worth the weighted rise in quality it brings,
-    as a share of the weighted surface: a newly covered point adds its cosine (0.5-1), a point seen
-    only obliquely so far adds the difference. So new coverage comes first, and once the surface is
-    covered the next views still go where it is seen worst. `graded=False`: binary coverage (a point
-    seen within 60° counts as done; the gain is the share of the surface newly covered).
+    every candidate's gain before any choice (see choose_greedily).
     `quality_now`: coverage.view_cosines(existing).max(axis=0), when the caller has it already."""
-    weights = np.ones(len(coverage.points)) if weights is None else np.asarray(weights, np.float64)
+    now = coverage.view_cosines(existing).max(axis=0, initial=0.0) if quality_now is None else quality_now
+    return choose_greedily(now, coverage.view_cosines(candidates), k, weights, graded)
+
+
+def choose_greedily(quality_now: np.ndarray, looks: np.ndarray, k: int, weights: np.ndarray | None = None,
+                    graded: bool = True) -> tuple[list[int], list[float], np.ndarray]:
+    """The greedy choice on viewing cosines: `quality_now` (N,) per surface point, `looks` (C, N) per
+    candidate (SurfaceCoverage.view_cosines: 0 unseen, 0.5-1 seen within 60°).
+
+    A point's quality is how squarely the best camera so far sees it. A candidate is worth the
+    weighted rise in quality it brings, as a share of the weighted surface: a newly covered point adds
+    its cosine (0.5-1), a point seen only obliquely so far adds the difference. So new coverage comes
+    first, and once the surface is covered the next views still go where it is seen worst.
+    `graded=False`: binary coverage (a point seen within 60° counts as done; the gain is the share of
+    the surface newly covered)."""
+    now = np.asarray(quality_now, np.float64)
+    looks = np.asarray(looks, np.float64).reshape(-1, len(now))
+    weights = np.ones(len(now)) if weights is None else np.asarray(weights, np.float64)
     total = float(weights.sum()) or 1.0
-    now = coverage.view_cosines(existing).max(axis=0, initial=0.0) if quality_now is None else np.asarray(quality_now, np.float64)
-    looks = coverage.view_cosines(candidates)  # (C, N)
     if not graded:
         now, looks = (now > 0).astype(np.float64), (looks > 0).astype(np.float64)
 
     def gains_now() -> np.ndarray:
-        return np.maximum(looks - now[None], 0.0) @ weights / total if len(looks) else np.zeros(0)
+        return np.maximum(looks - now[None], 0.0) @ weights / total
 
     first = gains_now()
     chosen, gains = [], []
-    for _ in range(min(k, len(candidates))):
+    for _ in range(min(k, len(looks))):
         gain = gains_now()
         gain[chosen] = -1.0
         best = int(np.argmax(gain))
@@ -134,14 +143,19 @@ def suggest_next_views(coverage: SurfaceCoverage, existing: list[Camera], k: int
                        quality_now: np.ndarray | None = None) -> tuple[list[Suggestion], np.ndarray]:
     """The next k views (greedy) and every candidate's initial gain as a (elevations, azimuths) heat map."""
     candidates = candidate_cameras(existing, config)
-    chosen, gains, first = greedy_views(coverage, existing, [camera for _, _, camera in candidates], k, weights, quality_now)
+    now = coverage.view_cosines(existing).max(axis=0, initial=0.0) if quality_now is None else np.asarray(quality_now)
+    looks = coverage.view_cosines([camera for _, _, camera in candidates])
+    chosen, gains, first = choose_greedily(now, looks, k, weights)
+    covered = now > 0
     azimuths = np.arange(0.0, 360.0, config.azimuth_step_deg)
     heat_map = first.reshape(len(config.elevations_deg), len(azimuths))
     last = camera_angles(existing[-1]) if existing else (0.0, 20.0, 2.5)
     suggestions = []
     for best, gain in zip(chosen, gains):
         azimuth, elevation, camera = candidates[best]
-        suggestions.append(Suggestion(azimuth, elevation, camera_angles(camera)[2], (0.0, 0.0, 0.0), gain,
+        new = float((~covered & (looks[best] > 0)).mean())  # what the photographer is told: surface newly covered
+        covered |= looks[best] > 0
+        suggestions.append(Suggestion(azimuth, elevation, camera_angles(camera)[2], (0.0, 0.0, 0.0), gain, new,
                                       describe_move(last[0], last[1], azimuth, elevation), camera))
         last = (azimuth, elevation)
     return suggestions, heat_map

@@ -138,7 +138,8 @@ def write_guidance(folder: Path, result: CaptureSuggestions) -> dict[str, Path]:
 
     folder = Path(folder)
     suggestions = [{"rank": n, "azimuth_deg": s.azimuth_deg, "elevation_deg": s.elevation_deg, "distance": s.distance,
-                    "look_at": list(s.look_at), "gain": s.gain, "sentence": s.sentence, "camera": s.camera.to_dict()}
+                    "look_at": list(s.look_at), "gain": s.gain, "new_coverage": s.new_coverage, "sentence": s.sentence,
+                    "camera": s.camera.to_dict()}
                    for n, s in enumerate(result.suggestions, start=1)]
     config = CandidateConfig()
     json_path = atomic_write_json(folder / "suggestions.json", {

@@ -1,6 +1,7 @@
 """Next views: with only the front photographed, the first suggestions go round the back."""
 
 import numpy as np
+import pytest
 import trimesh
 
 from lirm.engine.cameras import orbit_camera
@@ -35,6 +36,9 @@ def test_front_only_capture_gets_sent_round_the_back(renderer):
         assert heat.shape == (10, 24) and heat.max() == first.gain
         after = (coverage.covered(front + [s.camera for s in suggestions]) > 0).mean()
         assert after > before + 0.3
+        # What each shot is said to add, in turn, adds up to what the shots add together.
+        assert sum(s.new_coverage for s in suggestions) == pytest.approx(after - before)
+        assert suggestions[0].new_coverage > 0.15
     finally:
         coverage.release()
 
@@ -51,7 +55,7 @@ def test_lirm_suggest_on_a_capture_with_and_without_a_reconstruction(lego_captur
     assert main(["suggest", str(capture), "--k", "3"]) == 0
     captured = capsys.readouterr()
     assert "no reconstruction yet" in captured.err and "surface: bounding sphere" in captured.out
-    assert "1. azimuth" in captured.out and "3. azimuth" in captured.out
+    assert "1. azimuth" in captured.out and "3. azimuth" in captured.out and "of the surface newly covered" in captured.out
     heat = cv2.imread(str(capture / "guidance" / "heat_map.png"))
     assert heat is not None and heat.shape[1] > 24 * 24
     assert main(["suggest", str(tmp_path / "nowhere")]) == 2
