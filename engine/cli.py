@@ -517,8 +517,8 @@ def _run_bench_trajectory(args: argparse.Namespace) -> int:
     from .evaluation.evaluate import EvalConfig
     from .evaluation.heldout_sets import synthetic_heldout
     from .evaluation.report import comparison_table
-    from .guidance.trajectory_study import (TrajectoryConfig, guided_margin, random_spread, run_trajectory_study,
-                                            share_of_draws_beaten)
+    from .guidance.trajectory_study import (TrajectoryConfig, guided_margin, quality_follows_coverage, random_spread,
+                                            run_trajectory_study, share_of_draws_beaten)
     from .io.atomic_files import atomic_write, atomic_write_json
     from lirm.renderer.context import create_headless_context
     from lirm.renderer.pbr_renderer import PBRRenderer
@@ -574,9 +574,15 @@ def _run_bench_trajectory(args: argparse.Namespace) -> int:
                          f"{cell(i['chamfer'], 4)} | {cell(i['coverage'], 1, 100)} |")
     spread = random_spread(results["random"])
     beaten = share_of_draws_beaten(results["guided"], results["random"])
+    follows = quality_follows_coverage(results["random"])
     if args.random_draws > 1:
         lines += ["", "One random draw alone: PSNR standard deviation across draws, mean over objects, after update "
                   + ", ".join(f"{u + 1}: {v:.3f} dB" for u, v in enumerate(spread) if v is not None and u > 0) + "."]
+        lines += ["Does quality follow the views? Across random draws, within objects, the correlation of PSNR with the "
+                  "true-surface coverage of the views drawn, after update "
+                  + ", ".join(f"{u + 1}: {v:+.2f}" for u, v in enumerate(follows) if v is not None and u > 0)
+                  + " (about 0: this reconstructor's quality hardly depends on which views it gets, and no choice of "
+                    "views can beat another beyond noise)."]
     lines += ["Guided's PSNR is above " + ", ".join(f"{100 * v:.0f}% (update {u + 1})" for u, v in enumerate(beaten)
                                                   if v is not None and u > 0) + " of the random draws."]
     table += "\n".join(lines) + f"\n\n{time.perf_counter() - start:.0f} s in all.\n"
@@ -590,8 +596,9 @@ def _run_bench_trajectory(args: argparse.Namespace) -> int:
         atomic_write_json(args.out.with_suffix(".json"), {
             "reconstructor": description, "random_draws": args.random_draws,
             "margin": {against: margin_json(rows) for against, rows in margins.items()},
-            "random_psnr_spread": spread, "guided_above_random_draws": beaten,
-            **{name: {**r.scores.to_dict(), "coverage": r.coverage, "per_object": r.per_object} for name, r in results.items()}})
+            "random_psnr_spread": spread, "guided_above_random_draws": beaten, "random_psnr_coverage_correlation": follows,
+            **{name: {**r.scores.to_dict(), "coverage": r.coverage, "per_object": r.per_object, "per_draw": r.per_draw}
+               for name, r in results.items()}})
     return 0
 
 

@@ -237,3 +237,25 @@ def share_of_draws_beaten(guided: TrajectoryResult, random: TrajectoryResult, me
                 for r in rs if r is not None]
         out.append(float(np.mean(wins)) if wins else None)
     return out
+
+
+def quality_follows_coverage(result: TrajectoryResult, metric: str = "psnr") -> list[float | None]:
+    """Per update, how much a strategy's scores follow the coverage of the views it drew: the
+    correlation of `metric` with true-surface coverage across its draws, within objects (each
+    object's draws centred on their own means, then pooled). About 0: the reconstructor's quality
+    does not depend on which views it got, so no choice of views can beat another beyond noise;
+    positive: more coverage, better scores. Needs several draws (random)."""
+    out = []
+    for scores_by_object, coverage_by_object in zip(result.per_draw[metric], result.per_draw["coverage"]):
+        q, c = [], []
+        for scores, coverage in zip(scores_by_object, coverage_by_object):
+            pairs = np.array([(s, v) for s, v in zip(scores, coverage) if s is not None and v is not None and np.isfinite(s)])
+            if len(pairs) > 1:
+                q.append(pairs[:, 0] - pairs[:, 0].mean())
+                c.append(pairs[:, 1] - pairs[:, 1].mean())
+        if not q:
+            out.append(None)
+            continue
+        q_all, c_all = np.concatenate(q), np.concatenate(c)
+        out.append(float(np.corrcoef(q_all, c_all)[0, 1]) if q_all.std() > 0 and c_all.std() > 0 else None)
+    return out

@@ -14,8 +14,8 @@ from lirm.engine.evaluation.evaluate import EvalConfig
 from lirm.engine.evaluation.heldout_sets import synthetic_heldout
 from lirm.engine.guidance.coverage import SurfaceCoverage
 from lirm.engine.guidance.next_views import camera_angles, suggest_next_views
-from lirm.engine.guidance.trajectory_study import (TrajectoryConfig, azimuth_order, guided_margin, random_spread,
-                                                   run_trajectory_study, share_of_draws_beaten)
+from lirm.engine.guidance.trajectory_study import (TrajectoryConfig, azimuth_order, guided_margin, quality_follows_coverage,
+                                                   random_spread, run_trajectory_study, share_of_draws_beaten)
 from lirm.engine.model.config import preset
 from lirm.engine.model.lirm import LIRM
 from lirm.engine.model.volume_renderer import VolumeRenderConfig
@@ -71,6 +71,7 @@ def test_trajectory_study_compares_strategies_on_the_same_first_update(heldout, 
     assert margin[2]["psnr"] == pytest.approx(results["guided"].per_object["psnr"][2][0] - float(np.mean(draws)))
     assert margin[2]["intervals"]["psnr"].verdict == "within noise"  # one object decides nothing
     assert len(random_spread(results["random"])) == 3 and 0 <= share_of_draws_beaten(results["guided"], results["random"])[2] <= 1
+    assert all(v is None or -1.0 <= v <= 1.0 for v in quality_follows_coverage(results["random"]))
 
 
 def test_with_a_reconstructor_that_follows_its_views_guidance_sees_more(heldout, gl_context):
@@ -101,3 +102,18 @@ def test_lirm_bench_trajectory_reports_intervals(tmp_path, capsys):
     assert len(data["guided"]["per_object"]["psnr"][0]) == 2
     assert main(["bench", "trajectory", "some.safetensors", "--reconstructor", "carved-hull"]) == 2
     assert "no weights" in capsys.readouterr().err
+
+
+def test_quality_follows_coverage_is_measured_within_objects():
+    """Two objects at very different quality levels: what counts is whether, for one object, the draws
+    that saw more also scored better, not that one object is easier than the other."""
+    from lirm.engine.evaluation.evaluate import EvalResult
+    from lirm.engine.guidance.trajectory_study import TrajectoryResult
+
+    coverage = [[[0.3, 0.3]], [[0.5, 0.6, 0.7], [0.4, 0.5, 0.6]]]  # [update][object][draw]
+    following = [[[20.0, 15.0]], [[20.0, 20.5, 21.0], [15.0, 15.5, 16.0]]]
+    ignoring = [[[20.0, 15.0]], [[20.5, 20.0, 21.0], [16.0, 15.0, 15.5]]]
+    empty = EvalResult("synthetic", [], [], "")
+    assert quality_follows_coverage(TrajectoryResult(empty, [], {}, {"psnr": following, "coverage": coverage}))[1] == pytest.approx(1.0)
+    assert abs(quality_follows_coverage(TrajectoryResult(empty, [], {}, {"psnr": ignoring, "coverage": coverage}))[1]) < 0.6
+    assert quality_follows_coverage(TrajectoryResult(empty, [], {}, {"psnr": following, "coverage": coverage}))[0] is None
