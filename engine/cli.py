@@ -581,8 +581,8 @@ def _run_bench_trajectory(args: argparse.Namespace) -> int:
         lines += ["Does quality follow the views? Across random draws, within objects, the correlation of PSNR with the "
                   "true-surface coverage of the views drawn, after update "
                   + ", ".join(f"{u + 1}: {v:+.2f}" for u, v in enumerate(follows) if v is not None and u > 0)
-                  + " (about 0: this reconstructor's quality hardly depends on which views it gets, and no choice of "
-                    "views can beat another beyond noise)."]
+                  + " (about 0 would mean that the reconstructor's quality hardly depends on which views it gets, so "
+                    "that no choice of views can beat another beyond noise; positive, that views seeing more score better)."]
     lines += ["Guided's PSNR is above " + ", ".join(f"{100 * v:.0f}% (update {u + 1})" for u, v in enumerate(beaten)
                                                   if v is not None and u > 0) + " of the random draws."]
     table += "\n".join(lines) + f"\n\n{time.perf_counter() - start:.0f} s in all.\n"

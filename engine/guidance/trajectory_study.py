@@ -8,9 +8,9 @@ matters most). Updates 2 and 3 then take 4 more views each, chosen
 - at random: 4 of the remaining, seeded per object and draw; random is a distribution, so each
   object's random score is the mean over several draws (one draw alone varies by about as much as
   the strategies differ);
-- guided: greedily by next-view guidance on the current reconstruction (its mesh, weighted by the
-  model's uncertainty), restricted to the remaining pool views, as a photographer would be told;
-  once no view adds coverage, the rest as far as possible from every view so far.
+- guided: greedily by next-view guidance on the current reconstruction (viewing quality on its mesh,
+  weighted by the model's uncertainty), restricted to the remaining pool views, as a photographer
+  would be told; once no view adds anything, the rest as far as possible from every view so far.
 After each update the output views are scored exactly as `lirm eval` scores them. Guided is then
 compared with each other strategy object by object: the mean difference with its 95% interval
 (evaluation/paired_difference.py), and whether that says guided wins, loses or is within noise.

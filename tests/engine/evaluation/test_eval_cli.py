@@ -59,12 +59,12 @@ def test_lirm_eval_writes_the_markdown_table(tmp_path, tiny_checkpoint):
     table = out.read_text()
     assert table in done.stdout
     assert "| reconstructor | after update | PSNR ↑ | SSIM ↑ | LPIPS ↓ | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ | CD ↓ |" in table
-    for name in ("tiny.safetensors", "untrained 'tiny' (seed 0)", "mean-colour sphere"):
+    for name in ("tiny.safetensors", "untrained 'tiny' (seed 0)", "mean-colour sphere", "carved visual hull"):
         for update in (1, 2):
             assert f"| {name} | {update} | " in table
     numbers = json.loads(out.with_suffix(".json").read_text())
     assert [r["update"] for r in numbers["rows"]] == [1, 2]
-    assert set(numbers["baselines"]) == {"untrained 'tiny' (seed 0)", "mean-colour sphere"}
+    assert set(numbers["baselines"]) == {"untrained 'tiny' (seed 0)", "mean-colour sphere", "carved visual hull"}
 
 
 def test_lirm_eval_refuses_a_bad_set_and_a_missing_checkpoint(tmp_path, tiny_checkpoint):
