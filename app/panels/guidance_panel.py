@@ -31,13 +31,16 @@ class GuidancePanel:
         if not g:
             imgui.text_wrapped("No suggestions yet.")
             return
-        imgui.text(f"surface: {g['surface']}")
-        imgui.text(f"covered now {100 * g['coverage_now']:.0f}%, after these shots {100 * g['coverage_after']:.0f}%")
+        imgui.text_wrapped(f"surface: {g['surface']}")
+        imgui.text_wrapped(f"covered now {100 * g['coverage_now']:.0f}%, after these shots {100 * g['coverage_after']:.0f}%")
         for note in g.get("notes", []):
             imgui.text_wrapped(f"note: {note}")
         for s in g["suggestions"]:
-            imgui.bullet_text(f"{s['rank']}. {s['sentence']} (azimuth {s['azimuth_deg']:.0f}°, elevation "
-                              f"{s['elevation_deg']:.0f}°, +{100 * s.get('new_coverage', s['gain']):.0f}% new)")
+            # Wrapped, not bullet_text: the panel is narrow and the sentence is what the photographer needs.
+            new = s.get("new_coverage", s["gain"])  # suggestions.json before new_coverage had only the gain
+            worth = f"+{100 * new:.0f}% of the surface" if new >= 0.005 else "a squarer look"
+            imgui.text_wrapped(f"{s['rank']}. {s['sentence']} (azimuth {s['azimuth_deg']:.0f}°, elevation "
+                               f"{s['elevation_deg']:.0f}°; {worth})")
         if "heat_map" in g:
             self._view_sphere(g)
 
