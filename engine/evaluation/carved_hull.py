@@ -93,17 +93,18 @@ class CarvedHull:
         for camera, _, mask in seen:
             _carve(hull, camera, mask)
         colour_sum, weight = state.colour_sum.copy(), state.weight.copy()
-        for camera, image, mask in seen:
-            self._add_colour(hull, camera, image, mask, colour_sum, weight)
+        surface = np.argwhere(hull.surface())  # the carved hull is the same for every view of the update
+        if len(surface):
+            normals = _outward_normals(hull.occupancy)[surface[:, 0], surface[:, 1], surface[:, 2]]
+            inside = np.argwhere(hull.occupancy)
+            for camera, image, mask in seen:
+                self._add_colour(hull, surface, normals, inside, camera, image, mask, colour_sum, weight)
         return CarvedHullState(occupancy, colour_sum, weight, state.updates + 1)
 
-    def _add_colour(self, hull: VoxelHull, camera: Camera, image: np.ndarray, mask: np.ndarray,
-                    colour_sum: np.ndarray, weight: np.ndarray) -> None:
-        """Splat one view's colours onto the occupied voxels just below the surface it sees."""
-        surface = np.argwhere(hull.surface())
-        if not len(surface):
-            return
-        normals = _outward_normals(hull.occupancy)[surface[:, 0], surface[:, 1], surface[:, 2]]
+    def _add_colour(self, hull: VoxelHull, surface: np.ndarray, normals: np.ndarray, inside: np.ndarray, camera: Camera,
+                    image: np.ndarray, mask: np.ndarray, colour_sum: np.ndarray, weight: np.ndarray) -> None:
+        """Splat one view's colours onto the occupied voxels (`inside`) just below the surface it sees
+        (`surface` voxels with outward `normals`)."""
         h, w = mask.shape
         pixel, z = _pixels(camera, hull.centers_of(surface))
         ok = pixel >= 0
@@ -120,7 +121,6 @@ class CarvedHull:
         facing[pixel[order]] = cosine
         facing = cv2.dilate(facing.reshape(h, w).astype(np.float32), np.ones((3, 3), np.uint8)).ravel()
         # Every occupied voxel within the depth band under the visible surface takes the pixel's colour.
-        inside = np.argwhere(hull.occupancy)
         pixel, z = _pixels(camera, hull.centers_of(inside))
         ok = pixel >= 0
         band = self.config.colour_depth_voxels * hull.voxel_size

@@ -73,12 +73,10 @@ def describe_move(from_azimuth: float, from_elevation: float, to_azimuth: float,
 
 
 def greedy_views(coverage: SurfaceCoverage, existing: list[Camera], candidates: list[Camera], k: int,
-                 weights: np.ndarray | None = None, quality_now: np.ndarray | None = None,
-                 graded: bool = True) -> tuple[list[int], list[float], np.ndarray]:
+                 weights: np.ndarray | None = None, graded: bool = True) -> tuple[list[int], list[float], np.ndarray]:
     """Indices of the k candidates that add the most, chosen one after the other, their gains, and
-    every candidate's gain before any choice (see choose_greedily).
-    `quality_now`: coverage.view_cosines(existing).max(axis=0), when the caller has it already."""
-    now = coverage.view_cosines(existing).max(axis=0, initial=0.0) if quality_now is None else quality_now
+    every candidate's gain before any choice (see choose_greedily)."""
+    now = coverage.view_cosines(existing).max(axis=0, initial=0.0)
     return choose_greedily(now, coverage.view_cosines(candidates), k, weights, graded)
 
 

@@ -123,10 +123,11 @@ def suggest_for_capture(renderer, capture_dir: str | Path, k: int = 4, checkpoin
         suggestions, heat = suggest_next_views(coverage, cameras, k, weights=weights, config=CandidateConfig(),
                                                quality_now=looks.max(axis=0))
         clock.lap("candidates")
-        after = coverage.covered(cameras + [s.camera for s in suggestions])
     finally:
         coverage.release()
-    return CaptureSuggestions(suggestions, heat, float((vertex_coverage > 0).mean()), float((after > 0).mean()),
+    before = float((vertex_coverage > 0).mean())
+    # Each suggestion's new coverage counts what the ones before it left: together, what the shots add.
+    return CaptureSuggestions(suggestions, heat, before, before + sum(s.new_coverage for s in suggestions),
                               vertex_coverage, surface, notes, np.asarray(mesh.vertices, np.float32),
                               np.asarray(mesh.faces, np.int32), uncertainty)
 
