@@ -97,6 +97,22 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument("--after", type=int, help="with --frames: on top of this update instead (0 = afresh); later updates are set aside, not deleted")
     rec.set_defaults(run=_run_reconstruct)
 
+    rf = sub.add_parser("refine", help="per-scene refinement: fit the field to all the capture's views (one more step of its history)")
+    rf.add_argument("capture", type=Path, help="a capture folder made by `lirm capture`")
+    rf.add_argument("--init", choices=["auto", "lirm", "hull", "scratch"], default="auto",
+                    help="start from: auto (default: the last refinement, else the latest LIRM update, else the hull), "
+                         "lirm (the latest update), hull (the masks' carved visual hull) or scratch")
+    rf.add_argument("--preset", choices=["fast", "default", "quality"], default="default",
+                    help="settings: fast (1 min), default (3 min), quality (10 min, finer planes)")
+    rf.add_argument("--minutes", type=float, help="time budget of the fit (default: the preset's)")
+    rf.add_argument("--iterations", type=int, help="stop after this many steps (default: only the time budget)")
+    rf.add_argument("--holdout-every", type=int, metavar="K", help="keep every K-th view out of the fit and report PSNR/SSIM on them")
+    rf.add_argument("--checkpoint", type=Path, help="the weights the reconstruction was made with (default: as lirm reconstruct)")
+    rf.add_argument("--device", default="auto", help="auto (CUDA when present), cpu or cuda")
+    rf.add_argument("--novel-views", type=int, default=4, help="orbit views rendered after the refinement (default 4)")
+    rf.add_argument("--render-size", type=int, default=128, help="side of those renders in pixels (default 128)")
+    rf.set_defaults(run=_run_refine)
+
     ex = sub.add_parser("export", help="the capture's latest reconstruction as a textured PBR .glb")
     ex.add_argument("capture", type=Path, help="a capture folder with a reconstruction (`lirm reconstruct`)")
     ex.add_argument("-o", "--out", type=Path, required=True, help="the .glb to write (replaced only by a complete file)")
@@ -150,6 +166,10 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--baselines", action="store_true",
                     help="also score, on the same views, the untrained network of the same architecture, a sphere of the inputs' "
                          "mean colour and the carved visual hull coloured from the views (no learning)")
+    ev.add_argument("--refine", action="store_true",
+                    help="also refine after the last update on the same input views: the rows 'refined from LIRM' and "
+                         "'refined from the hull', with the seconds each took")
+    ev.add_argument("--refine-minutes", type=float, help="time budget of each refinement (default: lirm refine's, 3 minutes)")
     ev.add_argument("-o", "--out", type=Path, help="also write the table (.md) and the numbers (.json beside it)")
     ev.set_defaults(run=_run_eval)
 
@@ -214,6 +234,21 @@ def build_parser() -> argparse.ArgumentParser:
     bt.add_argument("--random-draws", type=int, default=5, help="random choices per object; random's score is their mean (default 5)")
     bt.add_argument("-o", "--out", type=Path, help="also write the table (.md) and the numbers (.json beside it)")
     bt.set_defaults(run=_run_bench_trajectory)
+
+    bf = bench_sub.add_parser("refine", help="refinement quality against its time budget (30 s, 1, 3, 10 min) on a held-out set, with peak memory")
+    bf.add_argument("checkpoint", type=Path, nargs="?", help="model weights (default: the shipped checkpoint)")
+    bf.add_argument("--set", choices=("synthetic", "gltf"), default="synthetic", help="held-out set (default synthetic)")
+    bf.add_argument("--objects", type=int, default=4, help="held-out synthetic objects (default 4)")
+    bf.add_argument("--size", type=int, default=128, help="side of the protocol views and of the input crops (default 128)")
+    bf.add_argument("--output-views", type=int, default=6, help="output views scored per object (default 6 of 12)")
+    bf.add_argument("--minutes", type=float, nargs="+", default=[0.5, 1.0, 3.0, 10.0], help="budgets (default 0.5 1 3 10)")
+    bf.add_argument("--init", choices=("lirm", "hull", "scratch"), default="lirm", help="start from (default lirm)")
+    bf.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                    help="a refinement setting, e.g. losses.eikonal=0, edge_ray_fraction=0, plane_resolutions=(128,); repeatable")
+    bf.add_argument("--models", type=Path, default=Path("../shared/data/pbr_models"), help="glTF folder of the gltf set")
+    bf.add_argument("--environments", type=Path, default=Path("../shared/data/envmaps"), help="HDR folder of the gltf set")
+    bf.add_argument("--json", type=Path, help="also write every object's numbers here")
+    bf.set_defaults(run=_run_bench_refine)
 
     bs = bench_sub.add_parser("synth", help="synthetic training views per second, and a contact sheet of them")
     bs.add_argument("--scenes", type=int, default=4, help="scenes to generate (default 4)")
@@ -446,6 +481,66 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
     print(f"summary: {result.out_dir / 'summary.json'}")
     if source.warning:
         print(source.warning, file=sys.stderr)
+    return 0
+
+
+def _run_refine(args: argparse.Namespace) -> int:
+    import torch
+    from tqdm import tqdm
+
+    from .capture.capture_folder import Capture
+    from .export.capture_export import reconstruction_model
+    from dataclasses import replace
+
+    from .reconstruction.refine_step import run_refine
+    from .reconstruction.session import ReconstructConfig
+    from .refine.config import refine_preset
+
+    _require_capture(args.capture)
+    _require_at_least_one(args, "novel_views", "render_size", "holdout_every")
+    if args.minutes is not None and not args.minutes > 0:
+        raise LirmUserError(f"--minutes must be positive, got {args.minutes}")
+    if args.iterations is not None and args.iterations < 1:
+        raise LirmUserError(f"--iterations must be at least 1, got {args.iterations}")
+    device = ("cuda" if torch.cuda.is_available() else "cpu") if args.device == "auto" else args.device
+    if device.startswith("cuda") and not torch.cuda.is_available():
+        raise LirmUserError("--device cuda: no CUDA device is available here; use --device cpu")
+    overrides = {"device": device}
+    if args.minutes is not None:
+        overrides["minutes"] = args.minutes
+    if args.iterations is not None:
+        overrides["iterations"] = args.iterations
+        if args.minutes is None:
+            overrides["minutes"] = None  # --iterations alone: run them all
+    config = refine_preset(args.preset, **overrides)
+    source = reconstruction_model(Capture.open(args.capture), args.checkpoint)
+    budget = f"{config.minutes:g} min" if config.minutes else f"{config.iterations} steps"
+    print(f"refining {args.capture} on {device} for {budget} (Ctrl-C stops and keeps the best state so far)", file=sys.stderr)
+    bar = tqdm(total=1000, desc="refine", unit="‰", file=sys.stderr, disable=None,
+               bar_format="{desc}: {percentage:3.0f}%|{bar}| {postfix}")
+
+    def progress(tick) -> None:
+        progress_events.emit("refine", int(1000 * tick.fraction), 1000)
+        bar.n = int(1000 * tick.fraction)
+        bar.set_postfix_str(f"step {tick.step}, loss {tick.loss:.4f}, batch PSNR {tick.psnr:.1f} dB, planes {tick.resolution}², "
+                            f"ETA {tick.eta:.0f} s", refresh=False)
+        bar.refresh()
+
+    try:
+        render = replace(ReconstructConfig(), novel_views=args.novel_views, render_size=args.render_size)
+        result = run_refine(args.capture, source, config, init=args.init, holdout_every=args.holdout_every, render=render,
+                            progress=progress)
+    finally:
+        bar.close()
+    for note in result.notes:
+        print(f"note: {note}")
+    how = {"budget": "time budget reached", "iterations": "all iterations done", "cancelled": "cancelled: kept the best state so far"}
+    print(f"refinement {result.number} (from {result.started_from}): {result.steps} steps in {result.seconds:.0f} s, "
+          f"{how[result.stopped]} -> {result.out_dir}/")
+    if result.holdout:
+        h = result.holdout
+        print(f"held-out views ({', '.join(h['views'])}): PSNR {h['psnr']:.2f} dB, SSIM {h['ssim']:.3f}")
+    print(f"export it with `lirm export {args.capture}`; step back with `lirm export --update N`")
     return 0
 
 
@@ -733,6 +828,21 @@ def _run_eval(args: argparse.Namespace) -> int:
             results.append((name, evaluate_heldout(reconstructor, objects, config, set_name=args.set, progress=_bar_updater(bar))))
         finally:
             bar.close()
+    if args.refine:
+        from .evaluation.refined_rows import evaluate_refined
+        from .refine.config import refine_preset
+
+        if args.refine_minutes is not None and not args.refine_minutes > 0:
+            raise LirmUserError(f"--refine-minutes must be positive, got {args.refine_minutes}")
+        refine = refine_preset("default", **({"minutes": args.refine_minutes} if args.refine_minutes else {}))
+        for name, init in (("refined from LIRM", "lirm"), ("refined from the hull", "hull")):
+            bar = _progress_bar(len(objects), f"{name} ({refine.minutes:g} min each)")
+            bar.unit = "object"
+            try:
+                results.append((name, evaluate_refined(model, objects, config, refine, init, set_name=args.set,
+                                                       progress=_bar_updater(bar))))
+            finally:
+                bar.close()
     if len(results) == 1:
         table = markdown_table(results[0][1], f"{label}: '{model.config.name}' model")
     else:
@@ -755,6 +865,32 @@ def _run_eval(args: argparse.Namespace) -> int:
             "checkpoint": str(args.checkpoint) if args.checkpoint else source.description,
             **results[0][1].to_dict(),
             "baselines": {name: result.to_dict() for name, result in results[1:]}, "input_sensitivity": sensitivity})
+    return 0
+
+
+def _run_bench_refine(args: argparse.Namespace) -> int:
+    from .bench.refine_bench import apply_options, dumps, refine_bench_table, run_refine_bench
+    from .evaluation.evaluate import EvalConfig
+    from .io.atomic_files import atomic_write
+    from .refine.config import refine_preset
+
+    _require_at_least_one(args, "objects", "size", "output_views")
+    if any(not m > 0 for m in args.minutes):
+        raise LirmUserError(f"--minutes must all be positive, got {args.minutes}")
+    source = _model_with_warning(args.checkpoint)
+    base = apply_options(refine_preset("default"), args.option)
+    args.updates = 4
+    objects = _heldout_objects(args)
+    bar = _progress_bar(len(args.minutes), "refinement budgets")
+    try:
+        result = run_refine_bench(source.model, objects, EvalConfig(output_views=args.output_views), base, args.minutes,
+                                  args.init, progress=_bar_updater(bar))
+    finally:
+        bar.close()
+    result["options"] = args.option
+    print(refine_bench_table(result, args.set))
+    if args.json:
+        atomic_write(args.json, lambda tmp: tmp.write_text(dumps(result), encoding="utf-8"))
     return 0
 
 

@@ -6,7 +6,8 @@
 3. The whole capture pipeline on those photos as if a user had taken them (COLMAP posing,
    normalisation, automatic masks, crops), and its pose and mask accuracy against the truth.
 4. Progressive LIRM updates on that capture with the shipped weights (untrained ones when none ship,
-   said loudly), and the asset exported as `asset.glb` (a validated, textured PBR glTF).
+   said loudly), then a per-scene refinement on all its views (engine/refine/: the shipped prior alone
+   gives a blob), and the asset exported as `asset.glb` (a validated, textured PBR glTF).
 5. `relit.png`: the asset beside the original object under two built-in environments the photos were
    not taken in, from four sides.
 """
@@ -44,6 +45,7 @@ class DemoConfig:
     export_grid: int = 128
     export_faces: int = 20_000
     export_texture: int = 512
+    refine_minutes: float | None = 2.0  # per-scene refinement before the export (None: export the LIRM state as is)
 
 
 @dataclass
@@ -130,7 +132,15 @@ def _reconstruct_and_export(capture_dir: Path, asset_path: Path, config: DemoCon
     say(f"reconstructing with LIRM ({source.description}{'' if source.trained else ', UNTRAINED'})")
     if source.note:
         say(f"about these weights: {source.note}")
-    run_reconstruction(capture_dir, source, replace(ReconstructConfig(), novel_views=2, render_size=96))
+    pictures = replace(ReconstructConfig(), novel_views=2, render_size=96)
+    run_reconstruction(capture_dir, source, pictures)
+    if config.refine_minutes:
+        from .reconstruction.refine_step import run_refine
+        from .refine.config import refine_preset
+
+        say(f"refining the reconstruction on all the views for {config.refine_minutes:g} minutes")
+        refined = run_refine(capture_dir, source, refine_preset("default", minutes=config.refine_minutes), render=pictures)
+        say(f"refinement: {refined.steps} steps in {refined.seconds:.0f} s from {refined.started_from}")
     say("exporting the asset (surface, UV atlas, baked PBR textures, .glb)")
     export = ExportConfig(mesh=replace(MeshExtractionConfig(), resolution=config.export_grid, face_budget=config.export_faces),
                           texture_size=config.export_texture)

@@ -80,11 +80,16 @@ class CarvedHull:
         images = views.image[0].permute(0, 2, 3, 1).float().cpu().numpy()  # (V, H, W, 3) sRGB
         backgrounds = views.image_bg[0].permute(0, 2, 3, 1).float().cpu().numpy()
         rays = views.plucker[0].permute(0, 2, 3, 1).double().cpu().numpy()
-        seen = []
-        for v in range(len(images)):
-            mask = object_mask(images[v], backgrounds[v]) > 0
-            if mask.any():  # a view without the object says nothing about where it is
-                seen.append((camera_from_plucker(rays[v]), images[v], mask))
+        masks = [object_mask(images[v], backgrounds[v]) > 0 for v in range(len(images))]
+        cameras = [camera_from_plucker(rays[v]) if masks[v].any() else None for v in range(len(images))]
+        return self.update_known(state, cameras, list(images), masks)
+
+    def update_known(self, state: CarvedHullState, cameras: list[Camera | None], images: list[np.ndarray],
+                     masks: list[np.ndarray]) -> CarvedHullState:
+        """The same update from views whose cameras and masks (bool, True = object) are known: a
+        capture's own masks, rather than the ones `update` reads back from the white fill."""
+        seen = [(camera, image, mask) for camera, image, mask in zip(cameras, images, masks)
+                if camera is not None and mask.any()]  # a view without the object says nothing about where it is
         if not seen:
             return CarvedHullState(state.occupancy, state.colour_sum, state.weight, state.updates + 1)
         c = self.config

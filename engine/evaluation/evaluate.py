@@ -9,6 +9,7 @@ is volume-rendered and scored. Numbers are means over output views (images) or o
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import asdict, dataclass, field
 from typing import Callable, Protocol
 
@@ -63,6 +64,7 @@ class UpdateScores:
     metallic_psnr: float | None
     chamfer: float | None
     views: int
+    seconds: float | None = None  # mean time per object to reconstruct up to this row (scoring excluded)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -136,7 +138,8 @@ def score_field(field_, obj: HeldoutObject, outputs: list[int], config: EvalConf
 def update_scores(update: int, s: dict[str, list[float]]) -> UpdateScores:
     return UpdateScores(update, _finite_mean(s.get("psnr", [])) or float("nan"), _finite_mean(s.get("ssim", [])) or float("nan"),
                         _finite_mean(s.get("lpips", [])), _finite_mean(s.get("albedo", [])), _finite_mean(s.get("roughness", [])),
-                        _finite_mean(s.get("metallic", [])), _mean_or_inf(s.get("chamfer")), len(s.get("psnr", [])))
+                        _finite_mean(s.get("metallic", [])), _mean_or_inf(s.get("chamfer")), len(s.get("psnr", [])),
+                        _finite_mean(s.get("seconds", [])))
 
 
 @torch.no_grad()
@@ -152,11 +155,17 @@ def evaluate_heldout(model: ProgressiveReconstructor, objects: list[HeldoutObjec
             progress(f"evaluating {obj.name}", k, len(objects))
         outputs = obj.protocol.outputs[:config.output_views] if config.output_views else obj.protocol.outputs
         state = model.initial_state(1)
+        seconds = 0.0
         for u, input_set in enumerate(obj.protocol.input_sets[:config.updates], start=1):
             if cancel is not None and cancel():
                 raise KeyboardInterrupt("evaluation cancelled")
-            state = model.update(state, model_inputs(model, obj, input_set, device))
-            score_field(model.decode(state), obj, outputs, config, per_update[u], lpips_net)
+            inputs = model_inputs(model, obj, input_set, device)
+            start = time.perf_counter()
+            state = model.update(state, inputs)
+            decoded = model.decode(state)
+            seconds += time.perf_counter() - start
+            per_update[u].setdefault("seconds", []).append(seconds)
+            score_field(decoded, obj, outputs, config, per_update[u], lpips_net)
     rows = [update_scores(u, s) for u, s in per_update.items() if s]
     return EvalResult(set_name, [o.name for o in objects], rows, "" if ok else f"LPIPS skipped: {why}")
 

@@ -44,17 +44,19 @@ def markdown_table(result: EvalResult, title: str | None = None) -> str:
 
 
 def comparison_table(results: list[tuple[str, EvalResult]], title: str | None = None) -> str:
-    """Several reconstructors scored on the same views, one row per (reconstructor, update)."""
+    """Several reconstructors scored on the same views, one row per (reconstructor, update), with the
+    seconds each took per object (to reconstruct, not to score)."""
     lines = [f"### {title}", ""] if title else []
     first = results[0][1]
     lines += [f"Set: {first.set_name}, {len(first.objects)} objects ({', '.join(first.objects)}); "
               "every row scored on the same input and output views.", ""]
-    lines.append("| reconstructor | after update " + HEADER)
-    lines.append("|---|---|---|---|---|---|---|---|---|---|")
+    lines.append("| reconstructor | after update " + HEADER + " seconds |")
+    lines.append("|---|---|---|---|---|---|---|---|---|---|---|")
     for name, result in results:
         for r in result.rows:
-            lines.append(f"| {name} | {r.update} | " + _cells(r))
-    lines += ["", NOTES]
+            lines.append(f"| {name} | {r.update} | " + _cells(r) + f" {_fmt(r.seconds, 1)} |")
+    lines += ["", NOTES, "Seconds: the mean time per object to reach that row on this machine (updates, or updates "
+              "and refinement), scoring excluded."]
     notes = sorted({result.lpips_note for _, result in results if result.lpips_note})
     lines += [note + "." for note in notes]
     return "\n".join(lines) + "\n"

@@ -16,7 +16,7 @@ import numpy as np
 from lirm.engine.capture.capture_folder import Capture
 from lirm.engine.errors import LirmUserError
 from lirm.engine.model.pretrained import ModelSource, load_model
-from lirm.engine.model.state_file import load_state
+from lirm.engine.model.field_state import load_field
 
 from .export_asset import ExportConfig, ExportResult, Progress, export_field
 
@@ -61,6 +61,7 @@ def export_capture(capture_dir: str | Path, out_path: str | Path, config: Export
     capture = Capture.open(capture_dir)
     state_path = latest_state_path(capture, update)
     source = source or reconstruction_model(capture, checkpoint)
-    state = load_state(state_path)
-    field = source.model.decode(state)  # a state of another architecture is refused here, by name
+    # An update's tokens are decoded by the model (a state of another architecture is refused there, by
+    # name); a refined state holds its own field.
+    field = load_field(state_path, source.model)
     return export_field(field, out_path, config, export_transform(capture), progress), source

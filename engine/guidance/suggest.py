@@ -60,15 +60,16 @@ def _surface(capture: Capture, checkpoint, grid: int) -> tuple[trimesh.Trimesh, 
     notes = []
     if capture.updates:
         from lirm.engine.export.capture_export import latest_state_path, reconstruction_model
-        from lirm.engine.model.state_file import load_state
+        from lirm.engine.model.field_state import load_field
 
         model = reconstruction_model(capture, checkpoint).model
-        latest = model.decode(load_state(latest_state_path(capture)))
+        latest = load_field(latest_state_path(capture), model)  # an update's state or a refined one
         previous_state = capture.root / capture.updates[-2]["state"] if len(capture.updates) > 1 else None
-        fields = ([model.decode(load_state(previous_state))] if previous_state and previous_state.is_file() else []) + [latest]
+        fields = ([load_field(previous_state, model)] if previous_state and previous_state.is_file() else []) + [latest]
         mesh, why_not = field_surface(latest, grid)
         if why_not is None:
-            return mesh, f"reconstruction after update {len(capture.updates)}", notes, fields
+            kind = "refinement" if capture.updates[-1].get("kind") == "refine" else "update"
+            return mesh, f"reconstruction after {kind} {len(capture.updates)}", notes, fields
         notes.append(f"the reconstruction has no surface yet ({why_not}); using the bounding sphere instead")
     else:
         notes.append("no reconstruction yet: suggestions come from how the cameras cover the object's bounding sphere")

@@ -41,7 +41,7 @@ def vertex_uncertainty(fields: list, vertices: np.ndarray, normals: np.ndarray, 
     # Viewing directions tilted 45 degrees from the normal, spread around it.
     helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
     t = np.cross(n, helper)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)  # a degenerate vertex's zero normal stays zero, not NaN
     b = np.cross(n, t)
     colours = []
     for k in range(directions):

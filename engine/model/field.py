@@ -74,8 +74,9 @@ class Field:
 
     @property
     def normal_eps(self) -> float:
-        """Central-difference step for numerical normals: 2 voxels of the hexa-plane (paper §3.4)."""
-        return 2.0 * (2.0 * self.config.radius / self.config.plane_resolution)
+        """Central-difference step for numerical normals: 2 voxels of the hexa-plane (paper §3.4); the
+        planes' own size, which a refined field (engine/refine/) may have raised above the decoder's."""
+        return 2.0 * (2.0 * self.config.radius / self.planes.shape[-1])
 
     def features(self, points: torch.Tensor) -> torch.Tensor:
         return query_planes(self.planes, points, self.config.radius)

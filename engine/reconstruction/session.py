@@ -76,7 +76,7 @@ def run_reconstruction(capture_dir: str | Path, source: ModelSource, config: Rec
                        progress: Progress | None = None, cancel: Callable[[], bool] | None = None) -> ReconstructResult:
     """All updates from scratch, the prepared views in frame order in sets of `views_per_update`."""
     capture = Capture.open(capture_dir)
-    views = _prepared_views(capture)
+    views = prepared_views(capture)
     sets = update_sets(list(views), config.views_per_update, config.updates)
     _set_aside_updates_after(capture, 0)
     session = _Session(capture, source, config)
@@ -100,7 +100,7 @@ def run_next_update(capture_dir: str | Path, source: ModelSource, frames: list[s
     from lirm.engine.model.state_file import load_state
 
     capture = Capture.open(capture_dir)
-    views = _prepared_views(capture)
+    views = prepared_views(capture)
     unknown = [f for f in frames if f not in views]
     if not frames or unknown:
         raise LirmUserError(f"{capture.root}: {'no frames chosen' if not frames else 'no prepared view for ' + ', '.join(unknown)}; "
@@ -110,12 +110,15 @@ def run_next_update(capture_dir: str | Path, source: ModelSource, frames: list[s
     if not 0 <= after <= done:
         raise LirmUserError(f"{capture.root} has {done} updates; cannot continue after update {after}")
     model = source.model
-    if after == 0:
+    # A refined step holds a field, not tokens: the network goes on from the last update's tokens
+    # before it (a later refinement warm-starts from the refined field again, engine/refine/).
+    base = last_update_entry(capture.updates[:after])
+    if base is None:
         state = model.initial_state(1)
     else:
-        state = load_state(capture.root / capture.updates[after - 1]["state"], device=str(next(model.parameters()).device))
+        state = load_state(capture.root / base["state"], device=str(next(model.parameters()).device))
         if state.signature != model.config.signature():
-            raise LirmUserError(f"update {after} of {capture.root} was made with other weights ({capture.updates[after - 1].get('weights')}); "
+            raise LirmUserError(f"update {base['update']} of {capture.root} was made with other weights ({base.get('weights')}); "
                                 f"pass the same --checkpoint, or start afresh with --after 0")
     _set_aside_updates_after(capture, after)
     session = _Session(capture, source, config)
@@ -123,7 +126,13 @@ def run_next_update(capture_dir: str | Path, source: ModelSource, frames: list[s
     return ReconstructResult(session.out_dir, session.records, source.trained)
 
 
-def _prepared_views(capture: Capture) -> dict:
+def last_update_entry(entries: list[dict]) -> dict | None:
+    """The last history entry made by a LIRM update (not a refinement), or None."""
+    updates = [e for e in entries if e.get("kind", "update") == "update"]
+    return updates[-1] if updates else None
+
+
+def prepared_views(capture: Capture) -> dict:
     views = {fid: capture.read_prepared(fid) for fid in sorted(capture.cameras)}
     views = {fid: v for fid, v in views.items() if v is not None}
     if not views:
@@ -171,33 +180,45 @@ class _Session:
         update_dir = self.out_dir / f"update_{number:02d}"
         save_state(state, update_dir / "state.safetensors")
         start = time.perf_counter()
-        with torch.inference_mode():
-            grid = OccupancyGrid.build(field, model.config.radius, config.render.beta,
-                                       2.0 * model.config.radius / config.render.samples_per_ray, config.occupancy)
-            skipped = []
-            for k, camera in enumerate(self.cameras):
-                images = render_camera(field, camera, config.render, grid, self.device)
-                _write_maps(update_dir, k, images.maps)
-                skipped.append(images.stats.skipped_fraction)
-        record = UpdateRecord(number, frames, seconds, time.perf_counter() - start, grid.occupied_fraction,
-                              float(np.mean(skipped)), str(update_dir.relative_to(capture.root)))
+        occupied, skipped = write_pictures(field, self.cameras, config, update_dir, self.device)
+        record = UpdateRecord(number, frames, seconds, time.perf_counter() - start, occupied, skipped,
+                              str(update_dir.relative_to(capture.root)))
         self.records.append(record)
         capture.updates.append({"update": number, "frames": frames, "seconds": round(seconds, 3),
                                 "weights": self.source.description, "trained": self.source.trained,
                                 "state": f"{record.out_dir}/state.safetensors"})
         capture.log("reconstruct", update=number, frames=frames, weights=self.source.description)
         capture.save()
-        summary_path = self.out_dir / "summary.json"
-        earlier = []
-        if summary_path.is_file() and number > 1:
-            import json
-
-            earlier = [u for u in json.loads(summary_path.read_text()).get("updates", []) if u["update"] < number]
-        atomic_write_json(summary_path, {
-            "weights": self.source.description, "trained": self.source.trained, "warning": self.source.warning,
-            "preset": model.config.name, "config": asdict(config), "updates": earlier + [asdict(record)],
-        })
+        append_summary(self.out_dir, self.source, config, number, asdict(record))
         return state
+
+
+def write_pictures(field, cameras: list, config: ReconstructConfig, folder: Path, device) -> tuple[float, float]:
+    """Volume-render `field` from `cameras` into folder/view_KK_<channel>.png; returns the occupancy
+    grid's occupied fraction and the mean share of samples it skipped."""
+    with torch.inference_mode():
+        grid = OccupancyGrid.build(field, field.radius, config.render.beta, 2.0 * field.radius / config.render.samples_per_ray,
+                                   config.occupancy)
+        skipped = []
+        for k, camera in enumerate(cameras):
+            images = render_camera(field, camera, config.render, grid, device)
+            _write_maps(folder, k, images.maps)
+            skipped.append(images.stats.skipped_fraction)
+    return grid.occupied_fraction, float(np.mean(skipped)) if skipped else 0.0
+
+
+def append_summary(out_dir: Path, source: ModelSource, config: ReconstructConfig, number: int, record: dict) -> None:
+    """summary.json: the steps before `number` as they were, then this one's record."""
+    import json
+
+    summary_path = out_dir / "summary.json"
+    earlier = []
+    if summary_path.is_file() and number > 1:
+        earlier = [u for u in json.loads(summary_path.read_text()).get("updates", []) if u["update"] < number]
+    atomic_write_json(summary_path, {
+        "weights": source.description, "trained": source.trained, "warning": source.warning,
+        "preset": source.model.config.name, "config": asdict(config), "updates": earlier + [record],
+    })
 
 
 def _write_maps(folder: Path, index: int, maps: dict[str, np.ndarray]) -> None:

@@ -1,0 +1,99 @@
+"""Refinement in the evaluation (`lirm eval --refine`, `lirm bench refine`): after the updates, the
+field is refined on the same input views the updates saw and scored on the same output views, so
+its rows sit beside the model's and the baselines'.
+
+- "refined from LIRM": the model's state after the last scored update, decoded and refined;
+- "refined from the hull": the carved visual hull of the same views' masks, refined.
+
+The input views are cut as a capture cuts photos, at the protocol's own size (the refinement fits
+the crops at their full prepared size, as `lirm refine` does); a real capture's are its prepared crops.
+Seconds count everything from the views to the refined field (the updates too), not the scoring.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+import numpy as np
+import torch
+
+from lirm.engine.refine import initial_fields
+from lirm.engine.refine.config import RefineConfig
+from lirm.engine.refine.refine_views import RefineViews
+from lirm.engine.refine.refiner import refine_field
+from lirm.engine.synth.view_crops import crop_like_capture
+
+from .evaluate import EvalConfig, EvalResult, model_device, model_inputs, score_field, update_scores
+from .heldout_sets import HeldoutObject
+
+Progress = Callable[[str, int, int], None]
+
+
+def refine_inputs(obj: HeldoutObject, indices: list[int]) -> RefineViews:
+    chosen = obj.views.select(indices)
+    size = chosen.image.shape[1]
+    crops = chosen if obj.inputs_prepared else crop_like_capture(chosen, size)
+    return RefineViews.from_object_views(crops, [f"view_{i:02d}" for i in indices])
+
+
+def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig, init: str):
+    """(refined field, seconds, refinement steps) for one held-out object."""
+    device = model_device(model)
+    sets = obj.protocol.input_sets[:updates]
+    views = refine_inputs(obj, [i for s in sets for i in s])
+    start = time.perf_counter()
+    hull = initial_fields.masks_hull(views, refine.hull_resolution, model.config.radius)
+    grid = initial_fields.sampling_grid(hull, model.config.radius, refine.hull_dilation_voxels, refine.device)
+    resolution = refine.plane_resolutions[0]
+    if init == "lirm":
+        with torch.no_grad():
+            state = model.initial_state(1)
+            for input_set in sets:
+                state = model.update(state, model_inputs(model, obj, input_set, device))
+            refinable = initial_fields.from_lirm(model.decode(state), resolution)
+    elif init == "hull":
+        refinable = initial_fields.from_hull(hull, model.config, model.heads, resolution, refine.hull_init_steps, refine.seed)
+    elif init == "scratch":
+        refinable = initial_fields.scratch(model.config, resolution, refine.seed)
+    else:
+        raise ValueError(f"unknown init {init!r}")
+    result = refine_field(refinable, views, refine, grid)
+    return result.field.frozen_field(), time.perf_counter() - start, result.steps
+
+
+def evaluate_refined(model, objects: list[HeldoutObject], config: EvalConfig, refine: RefineConfig, init: str,
+                     set_name: str = "synthetic", progress: Progress | None = None) -> EvalResult:
+    scores: dict[str, list[float]] = {}
+    for k, obj in enumerate(objects):
+        if progress:
+            progress(f"refining {obj.name}", k, len(objects))
+        field, seconds, _ = refine_object(model, obj, config.updates, refine, init)
+        outputs = obj.protocol.outputs[:config.output_views] if config.output_views else obj.protocol.outputs
+        scores.setdefault("seconds", []).append(seconds)
+        with torch.no_grad():
+            score_field(field, obj, outputs, config, scores)
+    if progress:
+        progress("refined", len(objects), len(objects))
+    updates = min(config.updates, min(len(o.protocol.input_sets) for o in objects)) if objects else config.updates
+    return EvalResult(set_name, [o.name for o in objects], [update_scores(updates, scores)], "LPIPS not computed for refined rows")
+
+
+def per_object_scores(model, objects: list[HeldoutObject], config: EvalConfig, refine: RefineConfig, init: str) -> list[dict]:
+    """One dict per object (for studies that pair objects across settings)."""
+    rows = []
+    for obj in objects:
+        field, seconds, steps = refine_object(model, obj, config.updates, refine, init)
+        outputs = obj.protocol.outputs[:config.output_views] if config.output_views else obj.protocol.outputs
+        scores: dict[str, list[float]] = {}
+        with torch.no_grad():
+            score_field(field, obj, outputs, config, scores)
+        row = update_scores(config.updates, scores).to_dict()
+        rows.append({"object": obj.name, "seconds": seconds, "steps": steps,
+                     **{k: row[k] for k in ("psnr", "ssim", "albedo_psnr", "chamfer")}})
+    return rows
+
+
+def mean_of(rows: list[dict], key: str) -> float:
+    values = [r[key] for r in rows if r[key] is not None and np.isfinite(r[key])]
+    return float(np.mean(values)) if values else float("nan")

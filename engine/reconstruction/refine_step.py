@@ -1,0 +1,175 @@
+"""`lirm refine CAPTURE`: per-scene refinement as one more step of the capture's reconstruction history.
+
+The refined field is fitted to the capture's prepared views (engine/refine/) and saved as a step
+like an update's: reconstruction/update_NN/state.safetensors (a refined field, model/field_state.py)
+with the same novel-view pictures, a refine.json (what it started from, the settings, the time, the
+losses, the hold-out scores), an entry in capture.json's `updates` with `"kind": "refine"`, and a
+record in summary.json. Export, guidance, evaluation and the app read it exactly like an update's.
+
+Where it starts (`init`):
+- "auto" (default): the last refined step if the history has one (a warm start: after new photos
+  and a new update, refining goes on from the earlier refinement with all the views), else the
+  latest LIRM update, else the carved hull;
+- "lirm": the latest LIRM update's decoded field; "hull": the visual hull of the masks; "scratch".
+
+The step is written into a hidden folder first and moved into place only when it is complete, so a
+cancelled or killed refinement leaves the history as it was.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+
+from lirm.engine.capture.capture_folder import Capture
+from lirm.engine.errors import LirmUserError
+from lirm.engine.io.atomic_files import atomic_write_json
+from lirm.engine.metrics import psnr, ssim
+from lirm.engine.model.field_state import load_field, save_field_state
+from lirm.engine.model.pretrained import ModelSource
+from lirm.engine.model.volume_renderer import render_camera
+from lirm.engine.refine import initial_fields
+from lirm.engine.refine.config import RefineConfig
+from lirm.engine.refine.refinable_field import RefinableField
+from lirm.engine.refine.refine_views import RefineViews
+from lirm.engine.refine.refiner import RefineTick, refine_field
+
+from .novel_views import novel_view_cameras
+from .session import ReconstructConfig, append_summary, last_update_entry, prepared_views, write_pictures
+
+INIT_CHOICES = ("auto", "lirm", "hull", "scratch")
+
+
+@dataclass
+class RefineStepResult:
+    number: int  # the step's place in the history
+    out_dir: Path
+    started_from: str
+    steps: int
+    seconds: float
+    stopped: str
+    holdout: dict | None  # {"views": [...], "psnr": x, "ssim": y} when views were held out
+    notes: list[str]
+
+
+def holdout_split(frames: list[str], every: int | None) -> tuple[list[str], list[str]]:
+    """(fitted, held out): every `every`-th view (the 1st, (K+1)-th, ...) is kept out of the fit."""
+    if not every:
+        return frames, []
+    if every < 2:
+        raise LirmUserError(f"--holdout-every must be at least 2 (every K-th view held out), got {every}")
+    held = frames[every - 1::every]
+    fitted = [f for f in frames if f not in held]
+    if not held or not fitted:
+        raise LirmUserError(f"--holdout-every {every} leaves nothing to {'hold out' if not held else 'fit'} "
+                            f"among {len(frames)} views; choose a smaller K")
+    return fitted, held
+
+
+def _starting_field(capture: Capture, init: str, source: ModelSource, views: RefineViews, hull, config: RefineConfig,
+                    notes: list[str], cancel) -> tuple:
+    """The refinable field to start from and a sentence naming it."""
+    model = source.model
+    resolution = config.plane_resolutions[0]
+    refined = [(i, e) for i, e in enumerate(capture.updates, start=1) if e.get("kind") == "refine"]
+    if init == "auto" and refined:
+        number, entry = refined[-1]
+        field = load_field(capture.root / entry["state"], model)
+        return RefinableField.from_field(field), f"refinement {number} (warm start)"
+    if init in ("auto", "lirm"):
+        base = last_update_entry(capture.updates)
+        if base is not None:
+            field = load_field(capture.root / base["state"], model)
+            return initial_fields.from_lirm(field, resolution), f"LIRM update {base['update']}"
+        if init == "lirm":
+            raise LirmUserError(f"{capture.root} has no LIRM update to start from: run `lirm reconstruct {capture.root}` "
+                                f"first, or refine with --init hull")
+        notes.append("no LIRM update yet: starting from the carved hull of the masks")
+        init = "hull"
+    if init == "hull":
+        return (initial_fields.from_hull(hull, model.config, model.heads, resolution, config.hull_init_steps, config.seed, cancel),
+                "carved hull")
+    return initial_fields.scratch(model.config, resolution, config.seed), "scratch"
+
+
+def run_refine(capture_dir: str | Path, source: ModelSource, config: RefineConfig = RefineConfig(), init: str = "auto",
+               holdout_every: int | None = None, render: ReconstructConfig = ReconstructConfig(),
+               progress: Callable[[RefineTick], None] | None = None,
+               cancel: Callable[[], bool] | None = None) -> RefineStepResult:
+    if init not in INIT_CHOICES:
+        raise LirmUserError(f"--init must be one of {', '.join(INIT_CHOICES)}, got {init!r}")
+    capture = Capture.open(capture_dir)
+    views_by_frame = prepared_views(capture)
+    fitted, held = holdout_split(list(views_by_frame), holdout_every)
+    views = RefineViews.from_prepared([views_by_frame[f] for f in fitted])
+    notes: list[str] = []
+    radius = source.model.config.radius
+    hull = initial_fields.masks_hull(views, config.hull_resolution, radius)
+    grid = initial_fields.sampling_grid(hull, radius, config.hull_dilation_voxels, config.device)
+    if grid is None:
+        notes.append("the masks' visual hull is empty (masks or poses disagree): sampling the whole bounding sphere")
+    refinable, started_from = _starting_field(capture, init, source, views, hull, config, notes, cancel)
+    result = refine_field(refinable, views, config, grid, progress, cancel)
+    field = result.field.frozen_field()
+
+    number = len(capture.updates) + 1
+    out_dir = capture.root / "reconstruction" / f"update_{number:02d}"
+    building = capture.root / "reconstruction" / f".building_{number:02d}_{os.getpid()}"
+    shutil.rmtree(building, ignore_errors=True)
+    building.mkdir(parents=True)
+    try:
+        save_field_state(field, building / "state.safetensors", updates=number, extra={"started_from": started_from})
+        holdout = _holdout_scores(field, [views_by_frame[f] for f in held], render) if held else None
+        start = time.perf_counter()
+        cameras = novel_view_cameras(list(capture.cameras.values()), render.novel_views, render.render_size)
+        occupied, skipped = write_pictures(field, cameras, render, building, torch.device("cpu"))
+        render_seconds = time.perf_counter() - start
+        record = {"update": number, "kind": "refine", "frames": fitted, "held_out": held, "started_from": started_from,
+                  "init": init, "seconds": round(result.seconds, 2), "steps": result.steps, "stopped": result.stopped,
+                  "best_step": result.best_step, "best_loss": result.best_loss, "holdout": holdout,
+                  "settings": config.to_dict(), "losses": result.history, "notes": notes}
+        atomic_write_json(building / "refine.json", record)
+        if out_dir.exists():  # left over from a step the history no longer lists (set aside, or a crash)
+            aside = capture.root / "reconstruction" / "set_aside" / time.strftime("%Y%m%d-%H%M%S")
+            aside.mkdir(parents=True, exist_ok=True)
+            shutil.move(str(out_dir), str(aside / out_dir.name))
+        os.replace(building, out_dir)
+    except BaseException:
+        shutil.rmtree(building, ignore_errors=True)
+        raise
+    rel = str(out_dir.relative_to(capture.root))
+    capture.updates.append({"update": number, "kind": "refine", "frames": fitted, "held_out": held,
+                            "started_from": started_from, "seconds": round(result.seconds, 2), "steps": result.steps,
+                            "weights": source.description, "trained": source.trained, "state": f"{rel}/state.safetensors"})
+    capture.log("refine", update=number, started_from=started_from, seconds=round(result.seconds, 2), steps=result.steps,
+                stopped=result.stopped)
+    capture.save()
+    append_summary(capture.root / "reconstruction", source, render, number,
+                   {"update": number, "kind": "refine", "frames": fitted, "seconds": round(result.seconds, 2),
+                    "render_seconds": round(render_seconds, 2), "occupied_fraction": occupied, "skipped_samples": skipped,
+                    "out_dir": rel, "started_from": started_from, "holdout": holdout})
+    return RefineStepResult(number, out_dir, started_from, result.steps, result.seconds, result.stopped, holdout, notes)
+
+
+@torch.no_grad()
+def _holdout_scores(field, held: list, render: ReconstructConfig) -> dict:
+    """PSNR and SSIM of the refined field rendered from the held-out views' own crops, over white."""
+    config = replace(render.render, numerical_normals=False)
+    from lirm.engine.model.occupancy_grid import OccupancyGrid
+
+    grid = OccupancyGrid.build(field, field.radius, config.beta, 2.0 * field.radius / config.samples_per_ray, render.occupancy)
+    psnrs, ssims = [], []
+    for view in held:
+        out = render_camera(field, view.camera, config, grid)
+        colour = np.clip(out["colour"], 0.0, 1.0)
+        psnrs.append(psnr(colour, view.image_masked))
+        ssims.append(ssim(colour, view.image_masked))
+    return {"views": [v.frame_id for v in held], "psnr": float(np.mean(psnrs)), "ssim": float(np.mean(ssims)),
+            "per_view_psnr": [round(float(p), 2) for p in psnrs]}

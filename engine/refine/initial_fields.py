@@ -1,0 +1,90 @@
+"""Where a refinement starts: the LIRM state's decoded field, the carved visual hull of the masks, or
+nothing; and the occupancy grid (the hull, dilated) that bounds where every refinement samples."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from scipy import ndimage
+
+from lirm.engine.evaluation.carved_hull import CarvedHull, CarvedHullState, HullField
+from lirm.engine.model.config import LIRMConfig
+from lirm.engine.model.field import Field, FieldHeads
+from lirm.engine.model.occupancy_grid import OccupancyGrid
+
+from .refinable_field import RefinableField, fresh_field
+from .refine_views import RefineViews
+
+INITS = ("lirm", "hull", "scratch")
+
+
+def masks_hull(views: RefineViews, resolution: int, radius: float) -> CarvedHullState:
+    """The visual hull of the views' masks, coloured from their pixels (evaluation/carved_hull.py)."""
+    hull = CarvedHull(image_size=views.images.shape[1], resolution=resolution, radius=radius)
+    return hull.update_known(hull.initial_state(1), views.cameras, list(views.images), [m > 0.5 for m in views.masks])
+
+
+def sampling_grid(hull: CarvedHullState, radius: float, dilation_voxels: int, device: str | torch.device = "cpu") -> OccupancyGrid | None:
+    """The hull, dilated by a few voxels for masks and poses that are not exact: no part of the
+    object can lie outside it, so samples there are wasted. None when the masks carved everything
+    away (inconsistent masks or poses): then the refinement samples the whole bounding sphere."""
+    if hull.occupancy is None or not hull.occupancy.any():
+        return None
+    occupied = ndimage.binary_dilation(hull.occupancy, iterations=dilation_voxels) if dilation_voxels else hull.occupancy
+    return OccupancyGrid(torch.from_numpy(np.ascontiguousarray(occupied)).to(device), radius)
+
+
+def from_lirm(field: Field, resolution: int) -> RefinableField:
+    """The decoded LIRM field, its planes resampled to `resolution`."""
+    refinable = RefinableField.from_field(field)
+    refinable.resample_planes(resolution)
+    return refinable
+
+
+def from_hull(hull: CarvedHullState, config: LIRMConfig, heads: FieldHeads | None, resolution: int, steps: int,
+              seed: int = 0, cancel=None) -> RefinableField:
+    """A field regressed onto the carved hull: its signed distance, colour and linearised albedo at
+    points spread over the bounding sphere and crowded near the hull's surface. `heads`: the
+    model's (the prior's decoders, as a starting point) or None for fresh ones."""
+    refinable = fresh_field(config, resolution, seed)
+    if heads is not None:
+        refinable = RefinableField.from_field(Field(config, heads, refinable.planes, refinable.panoramas))
+    if hull.occupancy is None or not hull.occupancy.any():
+        return refinable
+    target = HullField(hull, config.radius)
+    generator = torch.Generator().manual_seed(seed)
+    surface = torch.from_numpy(_surface_points(hull.occupancy, config.radius)).float()
+    optimiser = torch.optim.Adam([{"params": [refinable.planes], "lr": 2e-2},
+                                  {"params": list(refinable.heads.parameters()), "lr": 2e-3}]
+                                 + ([{"params": [refinable.panoramas], "lr": 1e-2}] if refinable.panoramas is not None else []))
+    voxel = 2.0 * config.radius / hull.occupancy.shape[0]
+    for _ in range(steps):
+        if cancel is not None and cancel():
+            break
+        near = surface[torch.randint(0, len(surface), (2048,), generator=generator)]
+        near = near + torch.randn(near.shape, generator=generator) * 2.0 * voxel
+        anywhere = (torch.rand(2048, 3, generator=generator) * 2.0 - 1.0) * config.radius
+        points = torch.cat([near, anywhere])[None]
+        with torch.no_grad():
+            truth = target.sample(points, view_dirs=torch.zeros_like(points))
+            towards = -truth.normal  # looking at the surface along its normal
+        field = refinable.field()
+        sample = field.sample(points, towards)
+        band = 0.1 * config.radius  # far from the surface only the sign matters much
+        loss = (sample.sdf.clamp(-band, band) - truth.sdf.clamp(-band, band)).abs().mean()
+        loss = loss + (sample.colour - truth.colour).abs().mean() + (sample.albedo - truth.albedo).abs().mean()
+        optimiser.zero_grad(set_to_none=True)
+        loss.backward()
+        optimiser.step()
+    return refinable
+
+
+def _surface_points(occupancy: np.ndarray, radius: float) -> np.ndarray:
+    surface = occupancy & ~ndimage.binary_erosion(occupancy)
+    index = np.argwhere(surface)
+    voxel = 2.0 * radius / occupancy.shape[0]
+    return (-radius + (index + 0.5) * voxel).astype(np.float32)
+
+
+def scratch(config: LIRMConfig, resolution: int, seed: int = 0) -> RefinableField:
+    return fresh_field(config, resolution, seed)

@@ -1,0 +1,58 @@
+"""The refinement's loss on one batch of rays: photometric, mask, eikonal, normal, albedo and a weak
+material prior (weights in config.LossWeights; the README says what each was worth)."""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+from .config import LossWeights
+from .ray_rendering import RayBatchRender
+
+
+def srgb_to_linear_torch(c: torch.Tensor) -> torch.Tensor:
+    c = c.clamp(0.0, 1.0)
+    return torch.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def sdf_gradients(field, points: torch.Tensor, eps: float) -> torch.Tensor:
+    """(K, 3) -> (K, 3) central differences of the SDF (differentiable: the eikonal term trains on them)."""
+    offsets = torch.eye(3, device=points.device, dtype=points.dtype) * eps
+    probes = torch.cat([points[:, None] + offsets[None], points[:, None] - offsets[None]], dim=1)
+    s = field.sdf(probes.reshape(1, -1, 3))[0].view(-1, 6)
+    return (s[:, :3] - s[:, 3:]) / (2.0 * eps)
+
+
+def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: torch.Tensor, weights: LossWeights,
+               eikonal_points: int, generator: torch.Generator) -> tuple[torch.Tensor, dict[str, float]]:
+    terms: dict[str, torch.Tensor] = {}
+    terms["colour"] = (render.colour - colours).abs().mean()
+    if weights.mask:
+        opacity = render.opacity.clamp(1e-4, 1.0 - 1e-4)
+        terms["mask"] = F.binary_cross_entropy(opacity, alphas)
+    if weights.albedo:
+        # Until the materials are inverse-rendered, the albedo follows the observed colour, linearised
+        # (as the carved hull colours its voxels): premultiplied like the render's albedo.
+        target = srgb_to_linear_torch(colours) * render.opacity.detach()[:, None]
+        terms["albedo"] = (render.albedo - target).abs().mean()
+    if weights.material_prior:
+        o = render.opacity.detach()
+        terms["material_prior"] = ((render.roughness - 0.5 * o) ** 2 + render.metallic**2).mean()
+    if (weights.eikonal or weights.normal) and render.surface_points.shape[0]:
+        points = render.surface_points
+        if points.shape[0] > eikonal_points:
+            points = points[torch.randint(0, points.shape[0], (eikonal_points,), generator=generator)]
+        # Half as many points anywhere in the bounding sphere keep the SDF a distance away from the surface too.
+        far = (torch.rand(eikonal_points // 2, 3, generator=generator) * 2.0 - 1.0) * field.radius
+        probes = torch.cat([points, far.to(points)])
+        gradient = sdf_gradients(field, probes, 0.5 * field.normal_eps)
+        terms["eikonal"] = ((gradient.norm(dim=-1) - 1.0) ** 2).mean()
+        if weights.normal:
+            predicted = field.sample(points[None]).normal[0]
+            numerical = F.normalize(gradient[: points.shape[0]], dim=-1).detach()
+            terms["normal"] = (1.0 - (predicted * numerical).sum(-1)).mean()
+    if weights.plane_tv:
+        planes = field.planes
+        terms["plane_tv"] = ((planes[..., 1:, :] - planes[..., :-1, :]) ** 2).mean() + ((planes[..., 1:] - planes[..., :-1]) ** 2).mean()
+    total = sum(getattr(weights, name) * value for name, value in terms.items())
+    return total, {name: float(value.detach()) for name, value in terms.items()}

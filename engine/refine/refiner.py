@@ -1,0 +1,147 @@
+"""The refinement loop: Adam on the field's planes, panoramas and heads against batches of rays from
+every view, within a time budget, coarse to fine, keeping the best state.
+
+Schedules run on the share of the budget spent (time, or iterations when no time is set): the plane
+resolution steps through `plane_resolutions` at equal shares, 1/beta rises linearly to its final value
+at `beta_ramp`, and the learning rates decay by a cosine to `final_lr_fraction`. Ctrl-C (or the
+`cancel` callback) stops the loop and the best state so far is kept: best by the running mean of the
+batch loss, checked every `best_every` steps.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import torch
+
+from lirm.engine.model.occupancy_grid import OccupancyGrid
+
+from .config import RefineConfig
+from .objective import batch_loss
+from .ray_rendering import render_ray_batch
+from .refinable_field import RefinableField
+from .refine_views import RefineViews
+
+
+@dataclass
+class RefineTick:
+    """What the progress callback sees after a step."""
+
+    step: int
+    fraction: float  # of the budget spent
+    elapsed: float  # seconds
+    eta: float  # seconds left (the budget's, or the iterations' at the current pace)
+    loss: float  # running mean
+    psnr: float  # of the batch colours, from the running mean squared error
+    resolution: int
+    inv_beta: float
+
+
+@dataclass
+class RefineResult:
+    field: RefinableField  # holding the best state
+    steps: int
+    seconds: float
+    best_step: int
+    best_loss: float
+    stopped: str  # "budget", "iterations" or "cancelled"
+    history: list[dict] = field(default_factory=list)  # every `best_every` steps: step, seconds, loss, terms
+
+
+def _optimiser(refinable: RefinableField, config: RefineConfig) -> torch.optim.Optimizer:
+    groups = [{"params": [refinable.planes], "lr": config.plane_lr, "base_lr": config.plane_lr},
+              {"params": list(refinable.heads.parameters()), "lr": config.head_lr, "base_lr": config.head_lr}]
+    if refinable.panoramas is not None:
+        groups.append({"params": [refinable.panoramas], "lr": config.nde_lr, "base_lr": config.nde_lr})
+    return torch.optim.Adam(groups, betas=(0.9, 0.99), eps=1e-15)
+
+
+def _stage(fraction: float, stages: int) -> int:
+    return min(int(fraction * stages), stages - 1)
+
+
+def refine_field(refinable: RefinableField, views: RefineViews, config: RefineConfig, grid: OccupancyGrid | None,
+                 progress: Callable[[RefineTick], None] | None = None,
+                 cancel: Callable[[], bool] | None = None) -> RefineResult:
+    device = torch.device(config.device)
+    refinable.to(device)
+    generator = torch.Generator().manual_seed(config.seed)
+    budget = None if config.minutes is None else 60.0 * config.minutes
+    resolutions = config.plane_resolutions
+    refinable.resample_planes(resolutions[0])
+    optimiser = _optimiser(refinable, config)
+    stage = 0
+    ema_loss = ema_mse = None
+    best = (math.inf, 0, refinable.snapshot())
+    history: list[dict] = []
+    start = time.perf_counter()
+    step, stopped = 0, "iterations"
+    try:
+        while step < config.iterations:
+            elapsed = time.perf_counter() - start
+            fraction = max(step / config.iterations, elapsed / budget if budget else 0.0)
+            if fraction >= 1.0:
+                stopped = "budget"
+                break
+            if cancel is not None and cancel():
+                stopped = "cancelled"
+                break
+            wanted = _stage(fraction, len(resolutions))
+            if wanted != stage:
+                stage = wanted
+                refinable.resample_planes(resolutions[stage])
+                optimiser = _optimiser(refinable, config)
+                # The best state so far was at a coarser resolution; compare afresh from here.
+                best = (math.inf, best[1], best[2])
+                ema_loss = None
+            inv_beta = config.inv_beta[0] + (config.inv_beta[1] - config.inv_beta[0]) * min(fraction / config.beta_ramp, 1.0)
+            decay = config.final_lr_fraction + (1.0 - config.final_lr_fraction) * 0.5 * (1.0 + math.cos(math.pi * fraction))
+            for group in optimiser.param_groups:
+                group["lr"] = group["base_lr"] * decay
+
+            index = views.sample_rays(config.rays_per_step, config.edge_ray_fraction, generator)
+            origins, directions = views.origins[index].to(device), views.directions[index].to(device)
+            colours, alphas = views.colours[index].to(device), views.alphas[index].to(device)
+            field_ = refinable.field()
+            render = render_ray_batch(field_, origins, directions, grid, 1.0 / inv_beta, config.coarse_samples,
+                                      config.fine_samples, generator)
+            loss, terms = batch_loss(field_, render, colours, alphas, config.losses, config.eikonal_points, generator)
+            optimiser.zero_grad(set_to_none=True)
+            loss.backward()
+            optimiser.step()
+            step += 1
+
+            mse = float(((render.colour.detach() - colours) ** 2).mean())
+            value = float(loss.detach())
+            ema_loss = value if ema_loss is None else 0.9 * ema_loss + 0.1 * value
+            ema_mse = mse if ema_mse is None else 0.9 * ema_mse + 0.1 * mse
+            if step % config.best_every == 0:
+                history.append({"step": step, "seconds": round(time.perf_counter() - start, 2), "loss": ema_loss,
+                                "resolution": refinable.resolution, "inv_beta": inv_beta, **terms})
+                # Only the last resolution's states are candidates: an earlier, coarser best would
+                # throw away the detail the finer planes are there for.
+                if ema_loss < best[0] and stage == len(resolutions) - 1:
+                    best = (ema_loss, step, refinable.snapshot())
+            if progress is not None:
+                elapsed = time.perf_counter() - start
+                fraction = max(step / config.iterations, elapsed / budget if budget else 0.0)
+                eta = max(budget - elapsed, 0.0) if budget else elapsed / step * (config.iterations - step)
+                if budget:
+                    eta = min(eta, elapsed / step * (config.iterations - step))
+                progress(RefineTick(step, min(fraction, 1.0), elapsed, eta, ema_loss, -10.0 * math.log10(max(ema_mse, 1e-10)),
+                                    refinable.resolution, inv_beta))
+    except KeyboardInterrupt:
+        stopped = "cancelled"
+    seconds = time.perf_counter() - start
+    if step and (not history or history[-1]["step"] != step) and ema_loss is not None:
+        history.append({"step": step, "seconds": round(seconds, 2), "loss": ema_loss, "resolution": refinable.resolution})
+    best_loss, best_step, snapshot = best
+    if best_step == 0 or math.isinf(best_loss):
+        # No candidate at the last resolution yet (a short or cancelled run): the latest state is the best known.
+        best_step, best_loss = step, (ema_loss if ema_loss is not None else math.inf)
+    else:
+        refinable.load_snapshot(snapshot)
+    return RefineResult(refinable, step, seconds, best_step, best_loss, stopped, history)

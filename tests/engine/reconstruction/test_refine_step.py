@@ -1,0 +1,93 @@
+"""`lirm refine` on a prepared capture (lego renders with known poses and alpha masks): the refined
+state is one more step of the history that export, suggest and the app read like an update's; a new
+refinement after a new update warm-starts from the last one; held-out views are scored; a cancelled
+refinement leaves the history as it was."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+
+from lirm.engine.capture.capture_folder import Capture
+from lirm.engine.cli import main
+from lirm.engine.model.field_state import load_field_state
+from lirm.engine.model.pretrained import load_model
+from lirm.engine.reconstruction.refine_step import holdout_split, run_refine
+from lirm.engine.refine.config import refine_preset
+from lirm.engine.errors import LirmUserError
+
+QUICK = ["--iterations", "12", "--novel-views", "1", "--render-size", "24"]
+FAST_UPDATE = ["--preset", "tiny", "--novel-views", "1", "--render-size", "24", "--grid-resolution", "48"]
+
+
+@pytest.fixture()
+def capture(lego_capture, tmp_path):
+    folder = tmp_path / "capture"
+    shutil.copytree(lego_capture, folder)
+    return folder
+
+
+def test_holdout_split_keeps_every_kth_view_out():
+    assert holdout_split(list("abcdefgh"), 4) == (list("abcefg"), list("dh"))
+    assert holdout_split(list("abc"), None) == (list("abc"), [])
+    with pytest.raises(LirmUserError, match="at least 2"):
+        holdout_split(list("abc"), 1)
+    with pytest.raises(LirmUserError, match="nothing to hold out"):
+        holdout_split(list("abc"), 5)
+
+
+@pytest.mark.slow
+def test_refine_is_a_step_of_the_history_that_export_and_suggest_read(capture, tmp_path, capsys):
+    from lirm.engine.export.gltf_validation import validate_gltf
+
+    assert main(["refine", str(capture), "--init", "lirm"] + QUICK) == 2
+    assert "no LIRM update to start from" in capsys.readouterr().err
+    assert main(["refine", str(capture), "--init", "hull", "--holdout-every", "4"] + QUICK) == 0
+    out = capsys.readouterr().out
+    assert "refinement 1 (from carved hull): 12 steps" in out and "held-out views" in out
+    entry = Capture.open(capture).updates[0]
+    assert entry["kind"] == "refine" and entry["started_from"] == "carved hull" and len(entry["held_out"]) == 2
+    step_dir = capture / "reconstruction" / "update_01"
+    record = json.loads((step_dir / "refine.json").read_text())
+    assert record["steps"] == 12 and record["holdout"]["psnr"] > 5 and record["losses"]
+    assert (step_dir / "view_00_colour.png").exists()
+    field, extra = load_field_state(step_dir / "state.safetensors")
+    assert extra["started_from"] == "carved hull" and field.planes.shape[-1] == refine_preset("default").plane_resolutions[-1]
+    assert not list((capture / "reconstruction").glob(".building_*"))
+
+    # A LIRM update after it goes on from the tokens (none yet: afresh); refining again warm-starts.
+    frames = sorted(Capture.open(capture).cameras)
+    assert main(["reconstruct", str(capture), "--frames", ",".join(frames[:4])] + FAST_UPDATE) == 0
+    assert main(["refine", str(capture)] + QUICK) == 0
+    assert "refinement 3 (from refinement 1 (warm start))" in capsys.readouterr().out
+    kinds = [u.get("kind", "update") for u in Capture.open(capture).updates]
+    assert kinds == ["refine", "update", "refine"]
+    summary = json.loads((capture / "reconstruction" / "summary.json").read_text())
+    assert [u["update"] for u in summary["updates"]] == [1, 2, 3]
+
+    glb = tmp_path / "refined.glb"
+    assert main(["export", str(capture), "-o", str(glb), "--faces", "2000", "--texture", "256", "--grid", "64"]) == 0
+    assert validate_gltf(glb).errors == 0
+    assert main(["export", str(capture), "--update", "1", "-o", str(tmp_path / "first.glb"), "--faces", "2000",
+                 "--texture", "128", "--grid", "48"]) == 0
+    capsys.readouterr()
+    assert main(["suggest", str(capture), "--k", "2", "--heat-map", str(tmp_path / "heat.png")]) == 0
+    assert "refinement 3" in capsys.readouterr().out
+
+
+def test_a_cancelled_refinement_leaves_the_history_as_it_was(capture):
+    assert main(["reconstruct", str(capture), "--updates", "1"] + FAST_UPDATE) == 0
+    before = (capture / "capture.json").read_text()
+    source = load_model(None, "tiny")
+    config = refine_preset("fast", minutes=None, iterations=50)
+
+    def cancel_in_the_middle(tick) -> None:
+        if tick.step == 3:
+            raise SystemExit("killed")  # not a KeyboardInterrupt: the process dies before the step is saved
+
+    with pytest.raises(SystemExit):
+        run_refine(capture, source, config, progress=cancel_in_the_middle)
+    assert (capture / "capture.json").read_text() == before
+    assert not list((capture / "reconstruction").glob(".building_*")) and not (capture / "reconstruction" / "update_02").exists()

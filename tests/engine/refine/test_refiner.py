@@ -1,0 +1,155 @@
+"""The refinement on small scenes: views of an analytic field rendered by the shared volume renderer,
+fitted from scratch or from a decoded field. The fit must lower its loss, keep the best state when
+cancelled, stay inside the masks' hull, and round-trip through the refined-state file."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from lirm.engine.cameras import orbit_cameras
+from lirm.engine.errors import LirmUserError
+from lirm.engine.model.analytic_fields import SphereField
+from lirm.engine.model.config import preset
+from lirm.engine.model.field_state import load_field, load_field_state, save_field_state
+from lirm.engine.model.lirm import LIRM
+from lirm.engine.model.volume_renderer import VolumeRenderConfig, render_camera
+from lirm.engine.refine import initial_fields
+from lirm.engine.refine.config import RefineConfig, refine_preset
+from lirm.engine.refine.ray_rendering import render_ray_batch
+from lirm.engine.refine.refinable_field import RefinableField
+from lirm.engine.refine.refine_views import RefineViews
+from lirm.engine.refine.refiner import refine_field
+
+SMALL = RefineConfig(minutes=None, iterations=40, rays_per_step=384, coarse_samples=24, fine_samples=8,
+                     plane_resolutions=(16, 32), eikonal_points=128, best_every=5, hull_resolution=32)
+
+
+@pytest.fixture(scope="module")
+def sphere_views() -> RefineViews:
+    """6 views of a checkered sphere of radius 0.5, 32 px."""
+    truth = SphereField(sphere_radius=0.5)
+    cameras = orbit_cameras(6, 20.0, 2.6, 32, 32, 50.0)
+    images, masks = [], []
+    for camera in cameras:
+        out = render_camera(truth, camera, VolumeRenderConfig(samples_per_ray=128, numerical_normals=False))
+        images.append(np.clip(out["colour"], 0, 1))
+        masks.append(out["opacity"])
+    return RefineViews.build([f"v{i}" for i in range(6)], cameras, np.stack(images), np.stack(masks))
+
+
+def _tiny_field(seed: int = 0) -> RefinableField:
+    return initial_fields.scratch(preset("tiny"), 16, seed)
+
+
+def test_views_flatten_every_pixel_with_its_ray_and_list_the_edges(sphere_views):
+    v = sphere_views
+    assert v.pixels == 6 * 32 * 32 and v.origins.shape == (v.pixels, 3)
+    assert torch.allclose(v.directions.norm(dim=-1), torch.ones(v.pixels), atol=1e-5)
+    edges = v.alphas[v.edge_index]
+    assert 0 < len(v.edge_index) < v.pixels / 2 and edges.min() < 0.5 < edges.max()
+    batch = v.sample_rays(100, 0.25, torch.Generator().manual_seed(0))
+    assert batch.shape == (100,) and int(batch.max()) < v.pixels
+    with pytest.raises(LirmUserError, match="NaN"):
+        RefineViews.build(["a"], v.cameras[:1], np.full((1, 32, 32, 3), np.nan), v.masks[:1])
+
+
+def test_hull_grid_holds_the_object_and_samples_stay_in_it(sphere_views):
+    hull = initial_fields.masks_hull(sphere_views, 32, 1.0)
+    grid = initial_fields.sampling_grid(hull, 1.0, dilation_voxels=1)
+    centre = grid.lookup(torch.zeros(1, 3))
+    corner = grid.lookup(torch.tensor([[0.9, 0.9, 0.9]]))
+    assert bool(centre) and not bool(corner)
+    assert 0.05 < grid.occupied_fraction < 0.4  # a ball of radius 0.5 fills 6.5% of the cube; the hull a bit more
+    field = _tiny_field().field()
+    index = torch.arange(0, sphere_views.pixels, 37)
+    out = render_ray_batch(field, sphere_views.origins[index], sphere_views.directions[index], grid, 0.05, 16, 8)
+    assert out.colour.shape == (len(index), 3) and torch.isfinite(out.colour).all()
+    assert 0 < out.samples < len(index) * 24  # empty space was skipped
+
+
+def test_refinement_lowers_its_loss_and_learns_the_silhouette(sphere_views):
+    hull = initial_fields.masks_hull(sphere_views, 32, 1.0)
+    grid = initial_fields.sampling_grid(hull, 1.0, 1)
+    result = refine_field(_tiny_field(), sphere_views, SMALL, grid)
+    assert result.steps == SMALL.iterations and result.stopped == "iterations"
+    first, last = result.history[0]["loss"], result.history[-1]["loss"]
+    assert last < 0.7 * first, (first, last)
+    # The fitted field's SDF: inside at the centre, outside near the bounding sphere's edge.
+    field = result.field.frozen_field()
+    sdf = field.sdf(torch.tensor([[[0.0, 0.0, 0.0], [0.0, 0.0, 0.9]]]))[0]
+    assert sdf[0] < 0 < sdf[1]
+
+
+def test_cancel_keeps_the_state_reached(sphere_views):
+    calls = []
+    cancel_after = 12
+
+    def cancel() -> bool:
+        calls.append(1)
+        return len(calls) > cancel_after
+
+    start = _tiny_field(seed=3)
+    before = start.snapshot()
+    result = refine_field(start, sphere_views, SMALL, None, cancel=cancel)
+    assert result.stopped == "cancelled" and result.steps == cancel_after
+    assert not torch.equal(result.field.planes.detach(), before["planes"])  # the work done is kept, not thrown away
+
+
+def test_keyboard_interrupt_stops_the_loop_and_keeps_the_best(sphere_views):
+    ticks = []
+
+    def progress(tick) -> None:
+        ticks.append(tick)
+        if tick.step == 30:
+            raise KeyboardInterrupt
+
+    result = refine_field(_tiny_field(), sphere_views, SMALL, None, progress=progress)
+    assert result.stopped == "cancelled" and result.steps == 30
+    assert 1 <= result.best_step <= 30 and np.isfinite(result.best_loss)
+    assert ticks[-1].resolution == 32 and 0 < ticks[-1].fraction <= 1 and ticks[-1].eta >= 0
+
+
+def test_decoded_field_resamples_to_finer_planes_without_moving_the_surface():
+    torch.manual_seed(0)
+    model = LIRM(preset("tiny")).eval()
+    with torch.no_grad():
+        field = model.decode(model.initial_state(1))
+    refinable = initial_fields.from_lirm(field, 64)
+    assert refinable.resolution == 64 and field.planes.shape[-1] == 32
+    points = torch.rand(1, 500, 3) * 1.6 - 0.8
+    with torch.no_grad():
+        before, after = field.sdf(points), refinable.field().sdf(points)
+    assert torch.allclose(before, after, atol=0.05)
+    assert refinable.field().normal_eps == pytest.approx(0.5 * field.normal_eps)
+    assert next(model.heads.parameters()) is not next(refinable.heads.parameters())  # the model is never changed
+
+
+def test_refined_state_round_trips_and_refuses_garbage(tmp_path):
+    field = _tiny_field(seed=5).frozen_field()
+    path = save_field_state(field, tmp_path / "state.safetensors", updates=3, extra={"started_from": "scratch"})
+    loaded, extra = load_field_state(path)
+    assert extra == {"started_from": "scratch", "updates": 3}
+    points = torch.rand(1, 200, 3) * 2 - 1
+    dirs = torch.nn.functional.normalize(torch.randn(1, 200, 3), dim=-1)
+    a, b = field.sample(points, dirs), loaded.sample(points, dirs)
+    assert torch.allclose(a.sdf, b.sdf) and torch.allclose(a.colour, b.colour) and torch.allclose(a.albedo, b.albedo)
+    assert torch.allclose(load_field(path).sdf(points), a.sdf)  # load_field needs no model for a refined state
+    (tmp_path / "bad.safetensors").write_bytes(b"not a state")
+    with pytest.raises(LirmUserError, match="corrupt or truncated"):
+        load_field(tmp_path / "bad.safetensors")
+    nan_field = type(field)(field.config, field.heads, field.planes * float("nan"), field.panoramas)
+    with pytest.raises(LirmUserError, match="NaN"):
+        save_field_state(nan_field, tmp_path / "nan.safetensors", 1)
+    assert not (tmp_path / "nan.safetensors").exists()
+
+
+def test_presets_and_bad_settings():
+    assert refine_preset("fast").minutes == 1.0 and refine_preset("default").minutes == 3.0
+    with pytest.raises(ValueError, match="unknown refinement preset"):
+        refine_preset("slow")
+    with pytest.raises(ValueError, match="positive"):
+        RefineConfig(minutes=0)
+    with pytest.raises(ValueError, match="plane resolutions"):
+        RefineConfig(plane_resolutions=(4,))
