@@ -78,10 +78,10 @@ class FieldPreview:
             return self._field
         from lirm.engine.capture.capture_folder import Capture
         from lirm.engine.export.capture_export import latest_state_path, reconstruction_model
-        from lirm.engine.model.state_file import load_state
+        from lirm.engine.model.field_state import load_field
 
         capture = Capture.open(capture_dir)
         model = reconstruction_model(capture, checkpoint).model
-        self._field = model.decode(load_state(latest_state_path(capture, update)))
+        self._field = load_field(latest_state_path(capture, update), model)  # an update's state or a refined one
         self._field_key = (str(capture_dir), update)
         return self._field
