@@ -31,6 +31,7 @@ class AppActions:
         self.jobs = jobs
         self.checkpoint = checkpoint
         self.listeners: list = []  # callables(event: str) told about changes the viewport must follow
+        self.cameras: dict = {}  # the open capture's posed cameras, by frame
 
     def _notify(self, event: str) -> None:
         for listener in self.listeners:
@@ -65,7 +66,8 @@ class AppActions:
             self._read_capture(Capture.open(self.state.capture_dir))
 
     def _read_capture(self, capture: Capture) -> None:
-        used_in = {fid: u["update"] for u in capture.updates for fid in u["frames"]}
+        used_in = {fid: u["update"] for u in capture.updates if u.get("kind", "update") == "update" for fid in u["frames"]}
+        self.cameras = dict(capture.cameras)
         frames = []
         for fid in sorted(capture.frames):
             f = capture.frames[fid]
@@ -136,8 +138,14 @@ class AppActions:
         """The views the next update will take: the picked ones, else the next unused ones."""
         if self.state.choices.selected:
             return list(self.state.choices.selected)
-        used = {f for u in self.state.updates[:self.state.viewing_update] for f in u["frames"]}
-        return [f.frame_id for f in self.state.frames if f.prepared and f.frame_id not in used][:VIEWS_PER_UPDATE]
+        from lirm.engine.reconstruction.session import spread_order
+
+        # Refinements fit every view; only the updates' views are used up.
+        used = [f for u in self.state.updates[:self.state.viewing_update] if u.get("kind", "update") == "update" for f in u["frames"]]
+        free = [f.frame_id for f in self.state.frames if f.prepared and f.frame_id not in set(used)]
+        if self.cameras and all(f in self.cameras for f in free + used):
+            free = spread_order(free, self.cameras, used)  # spread over the object, as `lirm reconstruct` splits them
+        return free[:VIEWS_PER_UPDATE]
 
     def fix_mask_with_box(self, frame_id: str, box: tuple[int, int, int, int]) -> Job | None:
         """The object is inside this box (x0, y0, x1, y1, full-image pixels) of one view: GrabCut there
@@ -175,8 +183,8 @@ class AppActions:
         if self.state.capture_dir is None:
             self.state.say("open or import a capture first", "warning")
             return None
-        if self.jobs.running("update"):
-            self.state.say("an update is already running", "warning")
+        if self.jobs.running("update") or self.jobs.running("refine"):
+            self.state.say("an update or refinement is already running", "warning")
             return None
         frames = self.next_views()
         if not frames:
@@ -204,6 +212,52 @@ class AppActions:
             else:
                 self.state.say(f"update {number} cancelled; the reconstruction is as it was")
         return self._start("update", f"LIRM update {number} ({len(frames)} views)", args, done)
+
+    def live_refine_path(self) -> Path | None:
+        """The field as the running refinement has it (refreshed every few seconds), or None."""
+        if self.state.capture_dir is None or not self.jobs.running("refine"):
+            return None
+        path = self.state.capture_dir / "app" / "refine_live.safetensors"
+        return path if path.is_file() else None
+
+    def run_refine(self, minutes: float | None = None) -> Job | None:
+        """Per-scene refinement of the latest step on all the views (`lirm refine`), shown live in the
+        viewport's field channel; Cancel keeps the best state so far as a step of the history."""
+        if self.state.capture_dir is None:
+            self.state.say("open or import a capture first", "warning")
+            return None
+        if self.jobs.running("refine") or self.jobs.running("update"):
+            self.state.say("wait for the running update or refinement to finish", "warning")
+            return None
+        if self.state.viewing_update != len(self.state.updates):
+            self.state.say("refinement goes on from the latest step: step forward to it (or run an update) first", "warning")
+            return None
+        minutes = float(minutes or self.state.choices.refine_minutes)
+        number = len(self.state.updates) + 1
+        live = self.state.capture_dir / "app" / "refine_live.safetensors"
+        live.parent.mkdir(parents=True, exist_ok=True)
+        args = ["refine", str(self.state.capture_dir), "--minutes", f"{minutes:g}", "--novel-views", "1", "--render-size", "64",
+                "--grid-resolution", "64", "--live", str(live), "--live-every", "4", *self._ckpt()]
+        previous_channel = self.state.choices.view.channel
+        self.set_channel("field")  # the field as it fits; the mesh preview follows when it is done
+
+        def done(job: Job) -> None:
+            self.refresh()
+            kept = len(self.state.updates) >= number
+            if kept:
+                self.state.choices.viewing_update = None
+                self.state.save_choices()
+                self.state.update_costs[number] = (job.seconds, job.peak_memory_mb)
+                how = "stopped early; the best state so far is" if job.state == "cancelled" else "done;"
+                self.state.say(f"refinement {how} step {number} of the history ({job.seconds:.0f} s)")
+                self._show_update(number)
+            elif job.state == "failed":
+                self.state.say(f"refinement failed: {job.error_text()}", "error")
+            else:
+                self.state.say("refinement cancelled before it could keep anything; the reconstruction is as it was")
+            if self.state.choices.view.channel == "field":
+                self.set_channel(previous_channel)
+        return self._start("refine", f"refinement {number} ({minutes:g} min)", args, done, cancel_grace=60.0)
 
     def step_back(self, update: int) -> None:
         """Look at (and go on from) an earlier update; later ones stay until a new update replaces them."""
@@ -345,9 +399,12 @@ class AppActions:
         return self._start("render", "turntable", args, done, detach_on_exit=True)
 
     # ---- jobs ----------------------------------------------------------------------------------
-    def _start(self, kind: str, title: str, args: list[str], done, detach_on_exit: bool = False) -> Job | None:
+    def _start(self, kind: str, title: str, args: list[str], done, detach_on_exit: bool = False,
+               cancel_grace: float | None = None) -> Job | None:
         try:
-            return self.jobs.start(kind, title, args, done, detach_on_exit)
+            if cancel_grace is None:
+                return self.jobs.start(kind, title, args, done, detach_on_exit)
+            return self.jobs.start(kind, title, args, done, detach_on_exit, cancel_grace)
         except OSError as err:
             self.state.say(f"could not start {title}: {err}", "error")
             return None

@@ -68,6 +68,7 @@ class SavedChoices:
     view: ViewSettings = field(default_factory=ViewSettings)
     export: ExportSettings = field(default_factory=ExportSettings)
     auto_update: bool = False
+    refine_minutes: float = 3.0
 
 
 @dataclass
@@ -113,7 +114,7 @@ class AppState:
             self.choices = SavedChoices(
                 selected=list(data.get("selected", [])), viewing_update=data.get("viewing_update"),
                 view=ViewSettings(**data.get("view", {})), export=ExportSettings(**data.get("export", {})),
-                auto_update=bool(data.get("auto_update", False)))
+                auto_update=bool(data.get("auto_update", False)), refine_minutes=float(data.get("refine_minutes", 3.0)))
         except (ValueError, TypeError) as err:
             self.say(f"{path} is damaged ({err}); starting with default settings (the file is left as it is)", "warning")
             self.choices = SavedChoices()

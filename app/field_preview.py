@@ -38,11 +38,14 @@ class FieldPreview:
     def busy(self) -> bool:
         return self._thread is not None and self._thread.is_alive()
 
-    def request(self, capture_dir: Path, update: int, checkpoint, camera: Camera, world_from_capture: np.ndarray) -> None:
-        """Render the field of `update` from `camera` (world frame) when the worker is free; the newest
-        request wins, older ones are dropped."""
+    def request(self, capture_dir: Path, update: int | Path, checkpoint, camera: Camera, world_from_capture: np.ndarray) -> None:
+        """Render the field of `update` (a step of the history, or a state file such as a running
+        refinement's live one) from `camera` (world frame) when the worker is free; the newest request
+        wins, older ones are dropped."""
         scale = self.size / max(camera.width, camera.height)
         small = camera_in_capture_frame(camera.scaled(scale), world_from_capture)
+        if isinstance(update, Path):  # a file that changes under the same name: its time is part of the key
+            update = (update, update.stat().st_mtime_ns if update.exists() else 0)
         key = (str(capture_dir), update, tuple(np.round(small.c2w, 6).ravel()), small.width, small.height)
         with self._lock:
             self._wanted = (key, capture_dir, update, checkpoint, small)
@@ -80,6 +83,10 @@ class FieldPreview:
         from lirm.engine.export.capture_export import latest_state_path, reconstruction_model
         from lirm.engine.model.field_state import load_field
 
+        if isinstance(update, tuple):  # (state file, its modification time)
+            self._field = load_field(update[0])  # a refined field: no model needed
+            self._field_key = (str(capture_dir), update)
+            return self._field
         capture = Capture.open(capture_dir)
         model = reconstruction_model(capture, checkpoint).model
         self._field = load_field(latest_state_path(capture, update), model)  # an update's state or a refined one

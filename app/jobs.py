@@ -32,6 +32,7 @@ class Job:
     argv: list[str]
     on_done: Callable[["Job"], None] | None = None
     detach_on_exit: bool = False  # keep running when the app quits (exports: the file still arrives)
+    cancel_grace: float = CANCEL_GRACE_SECONDS  # seconds after Ctrl-C before it is killed
     started: float = field(default_factory=time.monotonic)
     stage: str = "starting"
     done: int = 0
@@ -88,8 +89,8 @@ class JobRunner:
         self._lock = threading.Lock()
 
     def start(self, kind: str, title: str, args: list[str], on_done: Callable[[Job], None] | None = None,
-              detach_on_exit: bool = False) -> Job:
-        job = Job(kind, title, [self.python, "-m", "lirm.engine.cli", *args], on_done, detach_on_exit)
+              detach_on_exit: bool = False, cancel_grace: float = CANCEL_GRACE_SECONDS) -> Job:
+        job = Job(kind, title, [self.python, "-m", "lirm.engine.cli", *args], on_done, detach_on_exit, cancel_grace)
         self.log_dir.mkdir(parents=True, exist_ok=True)
         job.log_path = self.log_dir / f"{time.strftime('%Y%m%d-%H%M%S')}-{kind}-{os.getpid()}-{len(self.jobs)}.log"
         with open(job.log_path, "w", encoding="utf-8") as log:
@@ -157,7 +158,7 @@ class JobRunner:
     def poll(self) -> list[Job]:
         """Once per frame on the UI thread: escalate slow cancels, run the callbacks of finished jobs."""
         for job in self.running():
-            if job.cancel_requested is not None and time.monotonic() - job.cancel_requested > CANCEL_GRACE_SECONDS:
+            if job.cancel_requested is not None and time.monotonic() - job.cancel_requested > job.cancel_grace:
                 try:
                     os.killpg(job.process.pid, signal.SIGKILL)
                 except ProcessLookupError:

@@ -11,6 +11,7 @@ Steps (one object each):
     {"zoom": -6}                                      wheel steps on the viewport (negative: out)
     {"report_widgets": true}                          write where the named buttons are (for xdotool clicks)
     {"wait_updates": 3, "timeout": 300}               until the capture has this many updates (after a real click)
+    {"wait_file": "path", "timeout": 120}             until that file exists (e.g. a refinement's live state)
     {"close_window": true}                            what the window's close button does (asks if work runs)
     {"quit": true}
 Results (screenshots, frame times, timings, errors) go to <out>/script_result.json.
@@ -79,6 +80,15 @@ class ScriptRunner:
                 return
             if not enough:
                 self.result["errors"].append(f"step {self.index}: {len(self.app.state.updates)} updates, not {step['wait_updates']}")
+            self.waiting_since = None
+            self.frames_left = 2
+        elif "wait_file" in step:
+            self.waiting_since = self.waiting_since or time.monotonic()
+            there = Path(step["wait_file"]).exists()
+            if not there and time.monotonic() - self.waiting_since < float(step.get("timeout", 120)):
+                return
+            if not there:
+                self.result["errors"].append(f"step {self.index}: {step['wait_file']} did not appear")
             self.waiting_since = None
             self.frames_left = 2
         elif "close_window" in step:

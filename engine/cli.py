@@ -95,6 +95,8 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument("--grid-resolution", type=int, default=128, help="occupancy grid voxels per side for those renders (default 128; the paper uses 250)")
     rec.add_argument("--frames", help="instead of all updates: ONE more update with these frames (comma-separated ids), on top of the latest")
     rec.add_argument("--after", type=int, help="with --frames: on top of this update instead (0 = afresh); later updates are set aside, not deleted")
+    rec.add_argument("--order", choices=["spread", "frames"], default="spread",
+                     help="which views go into which update: spread (default: each set farthest-first over the object) or frames (frame order)")
     rec.set_defaults(run=_run_reconstruct)
 
     rf = sub.add_parser("refine", help="per-scene refinement: fit the field to all the capture's views (one more step of its history)")
@@ -111,6 +113,9 @@ def build_parser() -> argparse.ArgumentParser:
     rf.add_argument("--device", default="auto", help="auto (CUDA when present), cpu or cuda")
     rf.add_argument("--novel-views", type=int, default=4, help="orbit views rendered after the refinement (default 4)")
     rf.add_argument("--render-size", type=int, default=128, help="side of those renders in pixels (default 128)")
+    rf.add_argument("--grid-resolution", type=int, default=128, help="occupancy grid voxels per side for those renders (default 128)")
+    rf.add_argument("--live", type=Path, help="keep the field as it fits in this file (replaced every --live-every seconds, removed at the end)")
+    rf.add_argument("--live-every", type=float, default=5.0, help="seconds between those snapshots (default 5)")
     rf.set_defaults(run=_run_refine)
 
     ex = sub.add_parser("export", help="the capture's latest reconstruction as a textured PBR .glb")
@@ -247,8 +252,19 @@ def build_parser() -> argparse.ArgumentParser:
                     help="a refinement setting, e.g. losses.eikonal=0, edge_ray_fraction=0, plane_resolutions=(128,); repeatable")
     bf.add_argument("--models", type=Path, default=Path("../shared/data/pbr_models"), help="glTF folder of the gltf set")
     bf.add_argument("--environments", type=Path, default=Path("../shared/data/envmaps"), help="HDR folder of the gltf set")
+    bf.add_argument("--warm-start", action="store_true",
+                    help="instead: refining again after new views, cold (from LIRM) for the first --minutes against warm "
+                         "(from the earlier refinement) for 1/4, 1/2 and all of it")
     bf.add_argument("--json", type=Path, help="also write every object's numbers here")
     bf.set_defaults(run=_run_bench_refine)
+
+    bu = bench_sub.add_parser("update-order", help="update sets in walk-around order or spread over the object: LIRM and the carved hull after updates 1-3")
+    bu.add_argument("checkpoint", type=Path, nargs="?", help="model weights (default: the shipped checkpoint)")
+    bu.add_argument("--objects", type=int, default=8, help="held-out synthetic objects (default 8)")
+    bu.add_argument("--size", type=int, default=64, help="side of the protocol views (default 64)")
+    bu.add_argument("--output-views", type=int, default=6, help="output views scored per object (default 6 of 12)")
+    bu.add_argument("-o", "--out", type=Path, help="also write the table (.md) and the numbers (.json beside it)")
+    bu.set_defaults(run=_run_bench_update_order)
 
     bs = bench_sub.add_parser("synth", help="synthetic training views per second, and a contact sheet of them")
     bs.add_argument("--scenes", type=int, default=4, help="scenes to generate (default 4)")
@@ -447,7 +463,7 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
     source = load_model(args.checkpoint, args.preset)
     if source.warning:
         print("\n" + "!" * 100 + f"\n{source.warning}\n" + "!" * 100 + "\n", file=sys.stderr)
-    config = replace(ReconstructConfig(), views_per_update=args.views_per_update, updates=args.updates,
+    config = replace(ReconstructConfig(), views_per_update=args.views_per_update, updates=args.updates, order=args.order,
                      novel_views=args.novel_views, render_size=args.render_size,
                      occupancy=replace(ReconstructConfig().occupancy, resolution=args.grid_resolution))
     bar = tqdm(desc="LIRM updates", unit="update", file=sys.stderr, disable=None)
@@ -497,7 +513,9 @@ def _run_refine(args: argparse.Namespace) -> int:
     from .refine.config import refine_preset
 
     _require_capture(args.capture)
-    _require_at_least_one(args, "novel_views", "render_size", "holdout_every")
+    _require_at_least_one(args, "novel_views", "render_size", "holdout_every", "grid_resolution")
+    if not args.live_every > 0:
+        raise LirmUserError(f"--live-every must be positive, got {args.live_every}")
     if args.minutes is not None and not args.minutes > 0:
         raise LirmUserError(f"--minutes must be positive, got {args.minutes}")
     if args.iterations is not None and args.iterations < 1:
@@ -520,16 +538,17 @@ def _run_refine(args: argparse.Namespace) -> int:
                bar_format="{desc}: {percentage:3.0f}%|{bar}| {postfix}")
 
     def progress(tick) -> None:
-        progress_events.emit("refine", int(1000 * tick.fraction), 1000)
+        progress_events.emit(f"refining: step {tick.step}, loss {tick.loss:.4f}, ETA {tick.eta:.0f} s", int(1000 * tick.fraction), 1000)
         bar.n = int(1000 * tick.fraction)
         bar.set_postfix_str(f"step {tick.step}, loss {tick.loss:.4f}, batch PSNR {tick.psnr:.1f} dB, planes {tick.resolution}², "
                             f"ETA {tick.eta:.0f} s", refresh=False)
         bar.refresh()
 
     try:
-        render = replace(ReconstructConfig(), novel_views=args.novel_views, render_size=args.render_size)
+        render = replace(ReconstructConfig(), novel_views=args.novel_views, render_size=args.render_size,
+                         occupancy=replace(ReconstructConfig().occupancy, resolution=args.grid_resolution))
         result = run_refine(args.capture, source, config, init=args.init, holdout_every=args.holdout_every, render=render,
-                            progress=progress)
+                            progress=progress, live_path=args.live, live_every=args.live_every)
     finally:
         bar.close()
     for note in result.notes:
@@ -881,16 +900,51 @@ def _run_bench_refine(args: argparse.Namespace) -> int:
     base = apply_options(refine_preset("default"), args.option)
     args.updates = 4
     objects = _heldout_objects(args)
-    bar = _progress_bar(len(args.minutes), "refinement budgets")
-    try:
-        result = run_refine_bench(source.model, objects, EvalConfig(output_views=args.output_views), base, args.minutes,
-                                  args.init, progress=_bar_updater(bar))
-    finally:
-        bar.close()
+    if args.warm_start:
+        from .bench.refine_bench import run_warm_start_bench, warm_start_table
+
+        bar = _progress_bar(len(objects), "warm and cold starts")
+        try:
+            result = run_warm_start_bench(source.model, objects, EvalConfig(output_views=args.output_views), base,
+                                          args.minutes[0], progress=_bar_updater(bar))
+        finally:
+            bar.close()
+        table = warm_start_table(result)
+    else:
+        bar = _progress_bar(len(args.minutes), "refinement budgets")
+        try:
+            result = run_refine_bench(source.model, objects, EvalConfig(output_views=args.output_views), base, args.minutes,
+                                      args.init, progress=_bar_updater(bar))
+        finally:
+            bar.close()
+        table = refine_bench_table(result, args.set)
     result["options"] = args.option
-    print(refine_bench_table(result, args.set))
+    print(table)
     if args.json:
         atomic_write(args.json, lambda tmp: tmp.write_text(dumps(result), encoding="utf-8"))
+    return 0
+
+
+def _run_bench_update_order(args: argparse.Namespace) -> int:
+    from .bench.update_order_bench import run_update_order_bench, update_order_table
+    from .evaluation.evaluate import EvalConfig
+    from .io.atomic_files import atomic_write, atomic_write_json
+
+    _require_at_least_one(args, "objects", "size", "output_views")
+    source = _model_with_warning(args.checkpoint)
+    args.set, args.updates = "synthetic", 3
+    objects = _heldout_objects(args)
+    bar = _progress_bar(4, "update orders")
+    try:
+        result = run_update_order_bench(source.model, objects, EvalConfig(updates=3, output_views=args.output_views,
+                                                                          mesh_resolution=64), progress=_bar_updater(bar))
+    finally:
+        bar.close()
+    table = update_order_table(result, [o.name for o in objects])
+    print(table)
+    if args.out:
+        atomic_write(args.out, lambda tmp: tmp.write_text(table, encoding="utf-8"))
+        atomic_write_json(args.out.with_suffix(".json"), result)
     return 0
 
 

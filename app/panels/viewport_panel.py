@@ -57,18 +57,23 @@ class ViewportPanel:
         """The raw radiance field from this viewpoint, rendered in the background (see field_preview.py)."""
         app, viewport, preview = self.app, self.app.viewport, self.app.field_preview
         update = app.state.viewing_update
-        if update < 1 or app.world_from_capture is None:
+        live = app.actions.live_refine_path()
+        if live is not None:  # a refinement is running: its field as it fits, re-read whenever the file changes
+            update = (live, live.stat().st_mtime_ns)
+        if (live is None and update < 1) or app.world_from_capture is None:
             viewport.show_image(np.full((8, 8, 3), 0.18, np.float32), width, height)
             return
         if viewport.dirty or self._field_size != (width, height, update):
-            preview.request(app.state.capture_dir, update, app.actions.checkpoint, viewport.orbit.camera(width, height),
-                            app.world_from_capture)
+            preview.request(app.state.capture_dir, live if live is not None else update, app.actions.checkpoint,
+                            viewport.orbit.camera(width, height), app.world_from_capture)
             self._field_size = (width, height, update)
             viewport.dirty = False
         if preview.image is not None and preview.image_key != self._field_shown:
             viewport.show_image(preview.image, width, height)
             self._field_shown = preview.image_key
-        if preview.busy():
+        if live is not None:
+            imgui.text("refining: the field as it fits, refreshed every few seconds")
+        elif preview.busy():
             imgui.text("rendering the field...")
             imgui.same_line()
         if preview.error:

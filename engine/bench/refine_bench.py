@@ -15,7 +15,11 @@ import numpy as np
 
 from lirm.engine.evaluation.evaluate import EvalConfig
 from lirm.engine.evaluation.heldout_sets import HeldoutObject
-from lirm.engine.evaluation.refined_rows import mean_of, per_object_scores
+from lirm.engine.evaluation.evaluate import score_field, update_scores
+from lirm.engine.evaluation.refined_rows import lirm_field, mean_of, per_object_scores, refine_inputs
+from lirm.engine.refine import initial_fields
+from lirm.engine.refine.refinable_field import RefinableField
+from lirm.engine.refine.refiner import refine_field
 from lirm.engine.errors import LirmUserError
 from lirm.engine.refine.config import LossWeights, RefineConfig
 
@@ -82,3 +86,62 @@ def refine_bench_table(result: dict, set_name: str) -> str:
 
 def dumps(result: dict) -> str:
     return json.dumps(result, indent=1, default=lambda v: float(v) if isinstance(v, np.floating) else str(v))
+
+
+def _scored(field, obj: HeldoutObject, eval_config: EvalConfig) -> dict:
+    import torch
+
+    outputs = obj.protocol.outputs[:eval_config.output_views] if eval_config.output_views else obj.protocol.outputs
+    scores: dict[str, list[float]] = {}
+    with torch.no_grad():
+        score_field(field, obj, outputs, eval_config, scores)
+    row = update_scores(4, scores).to_dict()
+    return {k: row[k] for k in ("psnr", "ssim", "albedo_psnr", "chamfer")}
+
+
+def run_warm_start_bench(model, objects: list[HeldoutObject], eval_config: EvalConfig, base: RefineConfig, minutes: float,
+                         fractions: tuple[float, ...] = (0.25, 0.5, 1.0), progress=None) -> dict:
+    """The progressive case: a user refined after 2 updates (8 views); 8 more views arrive and update 4
+    runs. Refining again cold (from LIRM's update 4) for `minutes` is compared with going on from the
+    first refinement (warm) for shares of that time, on all 16 views."""
+    from lirm.engine.reconstruction.refine_step import warm_start_schedule
+
+    rows = []
+    for k, obj in enumerate(objects):
+        if progress:
+            progress(obj.name, k, len(objects))
+        radius = model.config.radius
+        sets = obj.protocol.input_sets
+        early = refine_inputs(obj, [i for s in sets[:2] for i in s])
+        views = refine_inputs(obj, [i for s in sets[:4] for i in s])
+        hull = initial_fields.masks_hull(early, base.hull_resolution, radius)
+        first = refine_field(initial_fields.from_lirm(lirm_field(model, obj, 2), base.plane_resolutions[0]), early,
+                             replace(base, minutes=minutes), initial_fields.sampling_grid(hull, radius, base.hull_dilation_voxels))
+        grid = initial_fields.sampling_grid(initial_fields.masks_hull(views, base.hull_resolution, radius), radius,
+                                            base.hull_dilation_voxels)
+        cold = refine_field(initial_fields.from_lirm(lirm_field(model, obj, 4), base.plane_resolutions[0]), views,
+                            replace(base, minutes=minutes), grid)
+        row = {"object": obj.name, "cold": {"minutes": minutes, **_scored(cold.field.frozen_field(), obj, eval_config)}, "warm": []}
+        for share in fractions:
+            start = RefinableField.from_field(first.field.frozen_field())
+            warm = refine_field(start, views, warm_start_schedule(replace(base, minutes=minutes * share)), grid)
+            row["warm"].append({"minutes": minutes * share, **_scored(warm.field.frozen_field(), obj, eval_config)})
+        rows.append(row)
+    if progress:
+        progress("done", len(objects), len(objects))
+    return {"minutes": minutes, "fractions": list(fractions), "objects": rows}
+
+
+def warm_start_table(result: dict) -> str:
+    objects = result["objects"]
+    lines = [f"Refining again after 8 more views (update 4): cold from LIRM for {result['minutes']:g} min against warm from "
+             f"the refinement after update 2; {len(objects)} objects, means:", "",
+             "| start | minutes | PSNR ↑ | SSIM ↑ | CD ↓ |", "|---|---|---|---|---|"]
+    mean = lambda items, key: float(np.mean([i[key] for i in items]))  # noqa: E731
+    cold = [o["cold"] for o in objects]
+    lines.append(f"| cold (LIRM update 4) | {result['minutes']:g} | {mean(cold, 'psnr'):.2f} | {mean(cold, 'ssim'):.3f} | {mean(cold, 'chamfer'):.4f} |")
+    for k, share in enumerate(result["fractions"]):
+        warm = [o["warm"][k] for o in objects]
+        lines.append(f"| warm (refinement 1) | {result['minutes'] * share:g} | {mean(warm, 'psnr'):.2f} | {mean(warm, 'ssim'):.3f} | "
+                     f"{mean(warm, 'chamfer'):.4f} |")
+    return "\n".join(lines) + "\n"

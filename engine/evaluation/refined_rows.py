@@ -37,9 +37,18 @@ def refine_inputs(obj: HeldoutObject, indices: list[int]) -> RefineViews:
     return RefineViews.from_object_views(crops, [f"view_{i:02d}" for i in indices])
 
 
+@torch.no_grad()
+def lirm_field(model, obj: HeldoutObject, updates: int):
+    """The model's decoded field after the object's first `updates` input sets."""
+    device = model_device(model)
+    state = model.initial_state(1)
+    for input_set in obj.protocol.input_sets[:updates]:
+        state = model.update(state, model_inputs(model, obj, input_set, device))
+    return model.decode(state)
+
+
 def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig, init: str):
     """(refined field, seconds, refinement steps) for one held-out object."""
-    device = model_device(model)
     sets = obj.protocol.input_sets[:updates]
     views = refine_inputs(obj, [i for s in sets for i in s])
     start = time.perf_counter()
@@ -47,11 +56,7 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
     grid = initial_fields.sampling_grid(hull, model.config.radius, refine.hull_dilation_voxels, refine.device)
     resolution = refine.plane_resolutions[0]
     if init == "lirm":
-        with torch.no_grad():
-            state = model.initial_state(1)
-            for input_set in sets:
-                state = model.update(state, model_inputs(model, obj, input_set, device))
-            refinable = initial_fields.from_lirm(model.decode(state), resolution)
+        refinable = initial_fields.from_lirm(lirm_field(model, obj, updates), resolution)
     elif init == "hull":
         refinable = initial_fields.from_hull(hull, model.config, model.heads, resolution, refine.hull_init_steps, refine.seed)
     elif init == "scratch":

@@ -128,7 +128,7 @@ def farthest_views(existing: list[Camera], candidates: list[Camera], k: int, exc
     for _ in range(min(k, len(options))):
         def nearest(i: int) -> float:
             d = direction(candidates[i])
-            return min((float(d @ t) for t in taken), default=-1.0)  # the cosine to the closest view so far
+            return max((float(d @ t) for t in taken), default=-1.0)  # the cosine to the closest view so far (the largest)
         best = min(options, key=nearest)
         chosen.append(best)
         options.remove(best)

@@ -59,6 +59,12 @@ class RefineStepResult:
     notes: list[str]
 
 
+def warm_start_schedule(config: RefineConfig) -> RefineConfig:
+    """Going on from a refined field: its finest planes and sharpest 1/beta from the first step (the
+    coarse-to-fine start would first blur away the detail already fitted)."""
+    return replace(config, plane_resolutions=(config.plane_resolutions[-1],), inv_beta=(config.inv_beta[1], config.inv_beta[1]))
+
+
 def holdout_split(frames: list[str], every: int | None) -> tuple[list[str], list[str]]:
     """(fitted, held out): every `every`-th view (the 1st, (K+1)-th, ...) is kept out of the fit."""
     if not every:
@@ -102,7 +108,10 @@ def _starting_field(capture: Capture, init: str, source: ModelSource, views: Ref
 def run_refine(capture_dir: str | Path, source: ModelSource, config: RefineConfig = RefineConfig(), init: str = "auto",
                holdout_every: int | None = None, render: ReconstructConfig = ReconstructConfig(),
                progress: Callable[[RefineTick], None] | None = None,
-               cancel: Callable[[], bool] | None = None) -> RefineStepResult:
+               cancel: Callable[[], bool] | None = None, live_path: Path | None = None,
+               live_every: float = 5.0) -> RefineStepResult:
+    """`live_path`: where to keep the field as it is while it fits (a refined-state file, replaced every
+    `live_every` seconds and removed at the end), for a viewer to show."""
     if init not in INIT_CHOICES:
         raise LirmUserError(f"--init must be one of {', '.join(INIT_CHOICES)}, got {init!r}")
     capture = Capture.open(capture_dir)
@@ -116,7 +125,17 @@ def run_refine(capture_dir: str | Path, source: ModelSource, config: RefineConfi
     if grid is None:
         notes.append("the masks' visual hull is empty (masks or poses disagree): sampling the whole bounding sphere")
     refinable, started_from = _starting_field(capture, init, source, views, hull, config, notes, cancel)
-    result = refine_field(refinable, views, config, grid, progress, cancel)
+    if started_from.endswith("(warm start)"):
+        config = warm_start_schedule(config)
+    live = None
+    if live_path is not None:
+        def live(current) -> None:
+            save_field_state(current.frozen_field(), live_path, updates=len(capture.updates) + 1, extra={"live": True})
+    try:
+        result = refine_field(refinable, views, config, grid, progress, cancel, live, live_every)
+    finally:
+        if live_path is not None:
+            Path(live_path).unlink(missing_ok=True)
     field = result.field.frozen_field()
 
     number = len(capture.updates) + 1

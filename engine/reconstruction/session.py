@@ -1,7 +1,8 @@
 """`lirm reconstruct`: progressive LIRM updates on a prepared capture, with pictures after each.
 
-The capture's prepared views are split, in frame order, into sets of `views_per_update`; each set
-is one update of the reconstruction state (the paper's progressive scheme). After every update the
+The capture's prepared views are split into sets of `views_per_update`, each spread over the object
+(farthest-first over viewing directions; in frame order on request); each set is one update of the
+reconstruction state (the paper's progressive scheme). After every update the
 state is decoded and volume-rendered from novel orbit views (colour, albedo, roughness, metallic,
 normal, opacity) and saved, so the app can show and step back through the history. capture.json's
 `updates` records which frames went into which update.
@@ -41,6 +42,7 @@ Progress = Callable[[str, int, int], None]
 class ReconstructConfig:
     views_per_update: int = 4
     updates: int | None = None  # None: as many as the prepared views allow
+    order: str = "spread"  # "spread": each update's views farthest-first over the object; "frames": in frame order
     novel_views: int = 4
     render_size: int = 128
     render: VolumeRenderConfig = field(default_factory=lambda: VolumeRenderConfig(samples_per_ray=96))
@@ -65,19 +67,43 @@ class ReconstructResult:
     trained: bool
 
 
-def update_sets(frame_ids: list[str], views_per_update: int, updates: int | None) -> list[list[str]]:
+def spread_order(frame_ids: list[str], cameras: dict, already: list[str] = ()) -> list[str]:
+    """The frames farthest-first over viewing directions: each next one is the view whose direction
+    from the object is the farthest from every view before it (those `already` used too), starting
+    from the first frame when nothing is used yet. Cut into sets, each update then sees the object
+    from all round instead of from one arc of a walk-around."""
+    from lirm.engine.guidance.next_views import farthest_views
+
+    frame_ids = list(frame_ids)
+    if not frame_ids:
+        return []
+    existing = [cameras[f] for f in already if f in cameras]
+    start = [] if existing else [0]
+    if not existing:
+        existing = [cameras[frame_ids[0]]]
+    rest = farthest_views(existing, [cameras[f] for f in frame_ids], len(frame_ids) - len(start), exclude=tuple(start))
+    return [frame_ids[i] for i in start + rest]
+
+
+def update_sets(frame_ids: list[str], views_per_update: int, updates: int | None, cameras: dict | None = None) -> list[list[str]]:
+    """The views of each update: in sets of `views_per_update`, spread over the object (spread_order)
+    when the cameras are given, else in frame order."""
     if views_per_update < 1:
         raise LirmUserError(f"--views-per-update must be at least 1, got {views_per_update}")
+    if cameras is not None:
+        frame_ids = spread_order(frame_ids, cameras)
     sets = [frame_ids[i:i + views_per_update] for i in range(0, len(frame_ids), views_per_update)]
     return sets if updates is None else sets[:updates]
 
 
 def run_reconstruction(capture_dir: str | Path, source: ModelSource, config: ReconstructConfig = ReconstructConfig(),
                        progress: Progress | None = None, cancel: Callable[[], bool] | None = None) -> ReconstructResult:
-    """All updates from scratch, the prepared views in frame order in sets of `views_per_update`."""
+    """All updates from scratch, the prepared views in sets of `views_per_update`, each set spread over
+    the object (`config.order` "spread", the default) or in frame order ("frames")."""
     capture = Capture.open(capture_dir)
     views = prepared_views(capture)
-    sets = update_sets(list(views), config.views_per_update, config.updates)
+    cameras = {f: capture.cameras[f] for f in views} if config.order == "spread" else None
+    sets = update_sets(list(views), config.views_per_update, config.updates, cameras)
     _set_aside_updates_after(capture, 0)
     session = _Session(capture, source, config)
     state = source.model.initial_state(1)

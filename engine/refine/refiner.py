@@ -65,7 +65,10 @@ def _stage(fraction: float, stages: int) -> int:
 
 def refine_field(refinable: RefinableField, views: RefineViews, config: RefineConfig, grid: OccupancyGrid | None,
                  progress: Callable[[RefineTick], None] | None = None,
-                 cancel: Callable[[], bool] | None = None) -> RefineResult:
+                 cancel: Callable[[], bool] | None = None,
+                 live: Callable[[RefinableField], None] | None = None, live_every: float = 5.0) -> RefineResult:
+    """`live`, when given, is called with the field as it is every `live_every` seconds (the app shows
+    it while the fit runs)."""
     device = torch.device(config.device)
     refinable.to(device)
     generator = torch.Generator().manual_seed(config.seed)
@@ -79,6 +82,7 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
     history: list[dict] = []
     start = time.perf_counter()
     step, stopped = 0, "iterations"
+    last_live = start
     try:
         while step < config.iterations:
             elapsed = time.perf_counter() - start
@@ -125,6 +129,9 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
                 # throw away the detail the finer planes are there for.
                 if ema_loss < best[0] and stage == len(resolutions) - 1:
                     best = (ema_loss, step, refinable.snapshot())
+            if live is not None and time.perf_counter() - last_live >= live_every:
+                live(refinable)
+                last_live = time.perf_counter()
             if progress is not None:
                 elapsed = time.perf_counter() - start
                 fraction = max(step / config.iterations, elapsed / budget if budget else 0.0)

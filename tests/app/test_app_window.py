@@ -181,3 +181,45 @@ def test_bad_input_through_the_window(lego_capture, tmp_path, x_display):
             assert path.read_bytes() == data, path
     updates = json.loads((capture / "capture.json").read_text())["updates"]
     assert [u["update"] for u in updates] == [1]  # the cancelled one left no trace, the second one counted
+
+
+def test_refine_in_the_window_shows_the_field_as_it_fits(lego_capture, tmp_path, x_display):
+    """Refine beside the update button: the viewport shows the live field while it fits, the result is
+    a step of the history (exported like an update's), and Cancel keeps the best state so far."""
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    live = capture / "app" / "refine_live.safetensors"
+    asset = tmp_path / "export" / "refined.glb"
+    script = {"steps": [
+        {"frames": 2},
+        {"action": "open_capture", "args": [str(capture)]},
+        {"action": "run_update"}, {"wait": "jobs"}, {"screenshot": "01_update"},
+        {"action": "run_refine", "args": [0.5]}, {"wait_file": str(live), "timeout": 120}, {"frames": 90},
+        {"screenshot": "02_refining"},
+        {"wait": "jobs", "timeout": 300}, {"screenshot": "03_refined"},
+        {"action": "export", "args": [str(asset), 3000, 256, 64]}, {"wait": "jobs"},
+        {"action": "run_refine", "args": [3]}, {"wait_file": str(live), "timeout": 120}, {"frames": 5},
+        {"action": "cancel", "args": ["refine"]}, {"wait": "jobs", "timeout": 180}, {"screenshot": "04_cancelled"},
+        {"report_widgets": True},
+        {"quit": True}]}
+    proc, result_path = _start_app(script, tmp_path, x_display)
+    output, _ = proc.communicate(timeout=900)
+    assert proc.returncode == 0, output[-3000:]
+    result = _result(result_path)
+    assert result["errors"] == [], result["errors"]
+    messages = [m["text"] for m in result["messages"]]
+    assert any(m.startswith("refinement done; step 2") for m in messages), messages
+    assert any(m.startswith("refinement stopped early; the best state so far is step 3") for m in messages), messages
+    updates = json.loads((capture / "capture.json").read_text())["updates"]
+    assert [u.get("kind", "update") for u in updates] == ["update", "refine", "refine"]
+    assert updates[1]["started_from"] == "LIRM update 1" and updates[2]["started_from"] == "refinement 2 (warm start)"
+    assert not live.exists()  # the live state is gone once the refinement ends
+    from lirm.engine.export.gltf_validation import validate_gltf
+
+    assert validate_gltf(asset).errors == 0
+    shots = {name: cv2.imread(path)[..., ::-1] for name, path in result["screenshots"].items()}
+    viewport = result["widgets"]["viewport"]
+    live_view = _viewport(shots["02_refining"], viewport).astype(int)
+    # The field, not an empty viewport: the refinement's object is drawn over the backdrop.
+    assert live_view.std() > 10, live_view.std()
+    assert np.abs(live_view - _viewport(shots["03_refined"], viewport)).mean() > 1  # field channel while fitting, the mesh after

@@ -53,7 +53,8 @@ def test_eval_scores_every_update(renderer):
 def test_lirm_eval_writes_the_markdown_table(tmp_path, tiny_checkpoint):
     out = tmp_path / "table.md"
     cmd = [sys.executable, "-m", "lirm.engine.cli", "eval", str(tiny_checkpoint), "--objects", "1", "--size", "32",
-           "--output-views", "2", "--mesh-resolution", "24", "--updates", "2", "--baselines", "-o", str(out)]
+           "--output-views", "2", "--mesh-resolution", "24", "--updates", "2", "--baselines", "--refine", "--refine-minutes", "0.05",
+           "-o", str(out)]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     table = out.read_text()
@@ -62,9 +63,14 @@ def test_lirm_eval_writes_the_markdown_table(tmp_path, tiny_checkpoint):
     for name in ("tiny.safetensors", "untrained 'tiny' (seed 0)", "mean-colour sphere", "carved visual hull"):
         for update in (1, 2):
             assert f"| {name} | {update} | " in table
+    # The refined rows: after the last update, on the same views, with the seconds each took.
+    assert "| refined from LIRM | 2 | " in table and "| refined from the hull | 2 | " in table
     numbers = json.loads(out.with_suffix(".json").read_text())
     assert [r["update"] for r in numbers["rows"]] == [1, 2]
-    assert set(numbers["baselines"]) == {"untrained 'tiny' (seed 0)", "mean-colour sphere", "carved visual hull"}
+    assert set(numbers["baselines"]) == {"untrained 'tiny' (seed 0)", "mean-colour sphere", "carved visual hull",
+                                         "refined from LIRM", "refined from the hull"}
+    refined = numbers["baselines"]["refined from LIRM"]["rows"][0]
+    assert refined["seconds"] > 2 and refined["psnr"] > 5 and numbers["rows"][1]["seconds"] > 0
 
 
 def test_lirm_eval_refuses_a_bad_set_and_a_missing_checkpoint(tmp_path, tiny_checkpoint):
@@ -98,3 +104,17 @@ def test_eval_on_a_real_capture_holds_out_every_fourth_view(lego_capture):
     result = evaluate_heldout(LIRM(preset("tiny")), [obj], config, set_name="capture")
     assert [r.update for r in result.rows] == [1, 2]
     assert all(r.albedo_psnr is None and r.chamfer is None and r.views == 2 for r in result.rows)
+
+
+def test_refined_rows_on_a_real_capture_fit_the_inputs_and_score_the_held_out_views(lego_capture):
+    from lirm.engine.evaluation.heldout_sets import capture_heldout
+    from lirm.engine.evaluation.refined_rows import evaluate_refined
+    from lirm.engine.refine.config import RefineConfig
+
+    (obj,) = capture_heldout(lego_capture)
+    config = EvalConfig(updates=2, render=VolumeRenderConfig(samples_per_ray=24, numerical_normals=False), mesh_resolution=16)
+    refine = RefineConfig(minutes=None, iterations=8, rays_per_step=256, plane_resolutions=(32,), hull_init_steps=5)
+    torch.manual_seed(0)
+    result = evaluate_refined(LIRM(preset("tiny")).eval(), [obj], config, refine, "hull", set_name="capture")
+    (row,) = result.rows
+    assert row.update == 2 and row.views == 2 and row.seconds > 0 and 5 < row.psnr < 60

@@ -29,6 +29,23 @@ def test_update_sets_split_in_frame_order():
     assert update_sets(list("abcdefghij"), 4, 2) == [list("abcd"), list("efgh")]
 
 
+def test_update_sets_spread_a_walk_around_over_the_object():
+    from lirm.engine.cameras import orbit_cameras
+
+    cameras = {f"f{k:02d}": c for k, c in enumerate(orbit_cameras(24, 20.0, 3.0, 32, 32, 40.0))}  # a 360° walk, 15° apart
+    sets = update_sets(sorted(cameras), 4, 3, cameras)
+    assert sets[0][0] == "f00" and [len(s) for s in sets] == [4, 4, 4]
+    def gaps(frames):
+        azimuths = sorted(int(f[1:]) * 15 for f in frames)
+        return np.diff(azimuths + [azimuths[0] + 360])
+
+    for chosen in sets[:2]:  # the first updates see the object from all round: no two of their views within 60°
+        assert gaps(chosen).min() >= 60, chosen
+    used = [f for s in sets for f in s]
+    assert len(set(used)) == 12 and gaps(used).max() <= 45  # no view twice; 12 views leave no arc unseen
+    assert gaps(sorted(cameras)[:12]).max() == 195  # in frame order the same 12 would be one arc
+
+
 def test_reconstruct_writes_each_update_and_warns_when_untrained(lego_capture, tmp_path, capsys, monkeypatch):
     capture = tmp_path / "capture"
     shutil.copytree(lego_capture, capture)

@@ -153,3 +153,14 @@ def test_presets_and_bad_settings():
         RefineConfig(minutes=0)
     with pytest.raises(ValueError, match="plane resolutions"):
         RefineConfig(plane_resolutions=(4,))
+
+
+def test_bench_options_set_one_setting_each_and_refuse_unknown_ones():
+    from lirm.engine.bench.refine_bench import apply_options
+
+    config = apply_options(refine_preset("default"), ["losses.eikonal=0", "edge_ray_fraction=0", "plane_resolutions=192"])
+    assert config.losses.eikonal == 0 and config.edge_ray_fraction == 0 and config.plane_resolutions == (192,)
+    assert config.losses.colour == refine_preset("default").losses.colour
+    for bad in ("losses.nope=1", "nope=1", "edge_ray_fraction", "minutes=abc"):
+        with pytest.raises(LirmUserError):
+            apply_options(refine_preset("default"), [bad])
