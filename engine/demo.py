@@ -45,7 +45,7 @@ class DemoConfig:
     export_grid: int = 128
     export_faces: int = 20_000
     export_texture: int = 512
-    refine_minutes: float | None = 2.0  # per-scene refinement before the export (None: export the LIRM state as is)
+    refine_minutes: float | None = 3.0  # per-scene refinement before the export (None: export the LIRM state as is)
 
 
 @dataclass

@@ -93,7 +93,21 @@ def _starting_field(capture: Capture, init: str, source: ModelSource, views: Ref
         base = last_update_entry(capture.updates)
         if base is not None:
             field = load_field(capture.root / base["state"], model)
-            return initial_fields.from_lirm(field, resolution), f"LIRM update {base['update']}"
+            from_lirm = initial_fields.from_lirm(field, resolution)
+            if init == "lirm":
+                return from_lirm, f"LIRM update {base['update']}"
+            # A prior that does not yet follow its photos can start further from them than the hull
+            # does: start from whichever of the two agrees better with the views.
+            from_hull = initial_fields.from_hull(hull, model.config, model.heads, resolution, config.hull_init_steps,
+                                                 config.seed, cancel)
+            grid = initial_fields.sampling_grid(hull, model.config.radius, config.hull_dilation_voxels)
+            losses = {name: initial_fields.photo_loss(candidate, views, grid, config)
+                      for name, candidate in (("lirm", from_lirm), ("hull", from_hull))}
+            if losses["lirm"] <= losses["hull"]:
+                return from_lirm, f"LIRM update {base['update']}"
+            notes.append(f"the carved hull agrees better with the photos than LIRM update {base['update']} "
+                         f"(loss {losses['hull']:.4f} against {losses['lirm']:.4f}): starting from the hull")
+            return from_hull, "carved hull"
         if init == "lirm":
             raise LirmUserError(f"{capture.root} has no LIRM update to start from: run `lirm reconstruct {capture.root}` "
                                 f"first, or refine with --init hull")

@@ -12,6 +12,9 @@ from lirm.engine.model.config import LIRMConfig
 from lirm.engine.model.field import Field, FieldHeads
 from lirm.engine.model.occupancy_grid import OccupancyGrid
 
+from .config import RefineConfig
+from .objective import batch_loss
+from .ray_rendering import render_ray_batch
 from .refinable_field import RefinableField, fresh_field
 from .refine_views import RefineViews
 
@@ -88,3 +91,19 @@ def _surface_points(occupancy: np.ndarray, radius: float) -> np.ndarray:
 
 def scratch(config: LIRMConfig, resolution: int, seed: int = 0) -> RefinableField:
     return fresh_field(config, resolution, seed)
+
+
+@torch.no_grad()
+def photo_loss(refinable: RefinableField, views: RefineViews, grid: OccupancyGrid | None, config: RefineConfig,
+               rays: int = 4096) -> float:
+    """The refinement's colour and mask loss of a starting field on a fixed batch of the views' rays at
+    the final 1/beta: how far a start is from the photos (the same rays for every candidate)."""
+    generator = torch.Generator().manual_seed(config.seed + 1)
+    index = views.sample_rays(rays, config.edge_ray_fraction, generator)
+    field = refinable.field()
+    render = render_ray_batch(field, views.origins[index], views.directions[index], grid, 1.0 / config.inv_beta[1],
+                              config.coarse_samples, config.fine_samples, generator)
+    weights = type(config.losses)(colour=1.0, mask=config.losses.mask, eikonal=0.0, normal=0.0, albedo=0.0,
+                                  material_prior=0.0, plane_tv=0.0)
+    loss, _ = batch_loss(field, render, views.colours[index], views.alphas[index], weights, 0, generator)
+    return float(loss)
