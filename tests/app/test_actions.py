@@ -12,6 +12,7 @@ import pytest
 from lirm.app.actions import AppActions
 from lirm.app.app_state import AppState
 from lirm.app.jobs import JobRunner
+from lirm.engine.reconstruction.session import spread_order
 
 
 @pytest.fixture
@@ -33,14 +34,16 @@ def test_updates_step_back_and_choices_survive_a_restart(app, lego_capture, tmp_
     shutil.copytree(lego_capture, capture)
     assert app.open_capture(capture)
     frames = [f.frame_id for f in app.state.frames]
-    assert app.next_views() == frames[:4]  # nothing picked: the next unused views
+    # Nothing picked: the next unused views, spread over the object as `lirm reconstruct` splits them.
+    assert app.next_views() == spread_order(frames, app.cameras)[:4] and app.next_views()[0] == frames[0]
     app.select_views([frames[6], frames[7], "nonsense"])
     assert app.state.choices.selected == [frames[6], frames[7]]
     job = app.run_update()
     assert job is not None and app.run_update() is None  # one update at a time
     app.jobs.wait()
     assert [u["frames"] for u in app.state.updates] == [[frames[6], frames[7]]]
-    assert app.state.choices.selected == [] and app.next_views() == frames[:4]
+    free = [f for f in frames if f not in (frames[6], frames[7])]
+    assert app.state.choices.selected == [] and app.next_views() == spread_order(free, app.cameras, [frames[6], frames[7]])[:4]
     assert job.peak_memory_mb and job.peak_memory_mb > 50
     app.run_update()
     app.jobs.wait()
