@@ -33,6 +33,7 @@ from lirm.engine.io.atomic_files import atomic_write, atomic_write_json
 from lirm.engine.io.images import write_png
 
 from .crop import PreparedView
+from .history_journal import finish_commit
 from .normalize import Normalization
 from .records import FileReport, ImageRecord
 
@@ -196,6 +197,11 @@ class Capture:
         path = root / CAPTURE_FILE
         if not path.exists():
             raise LirmUserError(f"{root} is not a capture (no {CAPTURE_FILE}); create one with `lirm capture PHOTOS -o {root}`")
+        try:
+            finish_commit(root)  # a change of the reconstruction history that a killed run left half done
+        except OSError as exc:
+            raise LirmUserError(f"{root}: an interrupted change of the reconstruction history could not be finished "
+                                f"({exc}); make the folder writable and open it again") from None
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, json.JSONDecodeError) as exc:

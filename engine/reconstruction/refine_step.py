@@ -18,8 +18,6 @@ cancelled or killed refinement leaves the history as it was.
 
 from __future__ import annotations
 
-import os
-import shutil
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -29,6 +27,8 @@ import numpy as np
 import torch
 
 from lirm.engine.capture.capture_folder import Capture
+from lirm.engine.capture.capture_lock import capture_lock
+from lirm.engine.capture.history_journal import HistoryBuild
 from lirm.engine.errors import LirmUserError
 from lirm.engine.io.atomic_files import atomic_write_json
 from lirm.engine.metrics import psnr, ssim
@@ -42,7 +42,7 @@ from lirm.engine.refine.refine_views import RefineViews
 from lirm.engine.refine.refiner import RefineTick, refine_field
 
 from .novel_views import novel_view_cameras
-from .session import ReconstructConfig, append_summary, last_update_entry, prepared_views, write_pictures
+from .session import ReconstructConfig, last_update_entry, prepared_views, summary_with, write_pictures
 
 INIT_CHOICES = ("auto", "lirm", "hull", "scratch")
 
@@ -125,9 +125,17 @@ def run_refine(capture_dir: str | Path, source: ModelSource, config: RefineConfi
                cancel: Callable[[], bool] | None = None, live_path: Path | None = None,
                live_every: float = 5.0) -> RefineStepResult:
     """`live_path`: where to keep the field as it is while it fits (a refined-state file, replaced every
-    `live_every` seconds and removed at the end), for a viewer to show."""
+    `live_every` seconds and removed at the end), for a viewer to show. The capture is locked while
+    it runs; the refined step joins the history only when it is finished (a killed or failed run
+    leaves the capture as it was)."""
     if init not in INIT_CHOICES:
         raise LirmUserError(f"--init must be one of {', '.join(INIT_CHOICES)}, got {init!r}")
+    with capture_lock(capture_dir, "lirm refine"):
+        return _refine_locked(capture_dir, source, config, init, holdout_every, render, progress, cancel, live_path, live_every)
+
+
+def _refine_locked(capture_dir, source: ModelSource, config: RefineConfig, init: str, holdout_every: int | None,
+                   render: ReconstructConfig, progress, cancel, live_path: Path | None, live_every: float) -> RefineStepResult:
     capture = Capture.open(capture_dir)
     views_by_frame = prepared_views(capture)
     fitted, held = holdout_split(list(views_by_frame), holdout_every)
@@ -153,41 +161,33 @@ def run_refine(capture_dir: str | Path, source: ModelSource, config: RefineConfi
     field = result.field.frozen_field()
 
     number = len(capture.updates) + 1
-    out_dir = capture.root / "reconstruction" / f"update_{number:02d}"
-    building = capture.root / "reconstruction" / f".building_{number:02d}_{os.getpid()}"
-    shutil.rmtree(building, ignore_errors=True)
-    building.mkdir(parents=True)
-    try:
-        save_field_state(field, building / "state.safetensors", updates=number, extra={"started_from": started_from})
+    with HistoryBuild(capture) as build:
+        folder = build.folder(number)
+        save_field_state(field, folder / "state.safetensors", updates=number, extra={"started_from": started_from})
         holdout = _holdout_scores(field, [views_by_frame[f] for f in held], render) if held else None
         start = time.perf_counter()
         cameras = novel_view_cameras(list(capture.cameras.values()), render.novel_views, render.render_size)
-        occupied, skipped = write_pictures(field, cameras, render, building, torch.device("cpu"))
+        occupied, skipped = write_pictures(field, cameras, render, folder, torch.device("cpu"))
         render_seconds = time.perf_counter() - start
         record = {"update": number, "kind": "refine", "frames": fitted, "held_out": held, "started_from": started_from,
                   "init": init, "seconds": round(result.seconds, 2), "steps": result.steps, "stopped": result.stopped,
                   "best_step": result.best_step, "best_loss": result.best_loss, "holdout": holdout,
                   "settings": config.to_dict(), "losses": result.history, "notes": notes}
-        atomic_write_json(building / "refine.json", record)
-        if out_dir.exists():  # left over from a step the history no longer lists (set aside, or a crash)
-            aside = capture.root / "reconstruction" / "set_aside" / time.strftime("%Y%m%d-%H%M%S")
-            aside.mkdir(parents=True, exist_ok=True)
-            shutil.move(str(out_dir), str(aside / out_dir.name))
-        os.replace(building, out_dir)
-    except BaseException:
-        shutil.rmtree(building, ignore_errors=True)
-        raise
-    rel = str(out_dir.relative_to(capture.root))
-    capture.updates.append({"update": number, "kind": "refine", "frames": fitted, "held_out": held,
-                            "started_from": started_from, "seconds": round(result.seconds, 2), "steps": result.steps,
-                            "weights": source.description, "trained": source.trained, "state": f"{rel}/state.safetensors"})
-    capture.log("refine", update=number, started_from=started_from, seconds=round(result.seconds, 2), steps=result.steps,
-                stopped=result.stopped)
-    capture.save()
-    append_summary(capture.root / "reconstruction", source, render, number,
-                   {"update": number, "kind": "refine", "frames": fitted, "seconds": round(result.seconds, 2),
-                    "render_seconds": round(render_seconds, 2), "occupied_fraction": occupied, "skipped_samples": skipped,
-                    "out_dir": rel, "started_from": started_from, "holdout": holdout})
+        atomic_write_json(folder / "refine.json", record)
+        state_path = build.final_state_path(number)
+        rel = str(Path(state_path).parent)
+        entry = {"update": number, "kind": "refine", "frames": fitted, "held_out": held,
+                 "started_from": started_from, "seconds": round(result.seconds, 2), "steps": result.steps,
+                 "weights": source.description, "trained": source.trained, "state": state_path}
+        log = {"time": time.strftime("%Y-%m-%dT%H:%M:%S"), "action": "refine", "update": number,
+               "started_from": started_from, "seconds": round(result.seconds, 2), "steps": result.steps,
+               "stopped": result.stopped}
+        summary = summary_with(capture.root / "reconstruction", source, render, number - 1, [
+            {"update": number, "kind": "refine", "frames": fitted, "seconds": round(result.seconds, 2),
+             "render_seconds": round(render_seconds, 2), "occupied_fraction": occupied, "skipped_samples": skipped,
+             "out_dir": rel, "started_from": started_from, "holdout": holdout}])
+        build.commit(number - 1, [entry], summary, [log])
+    out_dir = capture.root / rel
     return RefineStepResult(number, out_dir, started_from, result.steps, result.seconds, result.stopped, holdout, notes)
 
 

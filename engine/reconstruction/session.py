@@ -24,8 +24,9 @@ import numpy as np
 import torch
 
 from lirm.engine.capture.capture_folder import Capture
+from lirm.engine.capture.capture_lock import capture_lock
+from lirm.engine.capture.history_journal import HistoryBuild
 from lirm.engine.errors import LirmUserError
-from lirm.engine.io.atomic_files import atomic_write_json
 from lirm.engine.io.images import to_uint8, write_png
 from lirm.engine.model.occupancy_grid import OccupancyConfig, OccupancyGrid
 from lirm.engine.model.pretrained import ModelSource
@@ -99,22 +100,29 @@ def update_sets(frame_ids: list[str], views_per_update: int, updates: int | None
 def run_reconstruction(capture_dir: str | Path, source: ModelSource, config: ReconstructConfig = ReconstructConfig(),
                        progress: Progress | None = None, cancel: Callable[[], bool] | None = None) -> ReconstructResult:
     """All updates from scratch, the prepared views in sets of `views_per_update`, each set spread over
-    the object (`config.order` "spread", the default) or in frame order ("frames")."""
-    capture = Capture.open(capture_dir)
-    views = prepared_views(capture)
-    cameras = {f: capture.cameras[f] for f in views} if config.order == "spread" else None
-    sets = update_sets(list(views), config.views_per_update, config.updates, cameras)
-    _set_aside_updates_after(capture, 0)
-    session = _Session(capture, source, config)
-    state = source.model.initial_state(1)
-    for number, frames in enumerate(sets, start=1):
-        if cancel is not None and cancel():
-            break
-        if progress:
-            progress("update", number - 1, len(sets))
-        state = session.apply(state, number, frames, views)
-        if progress:
-            progress("update", number, len(sets))
+    the object (`config.order` "spread", the default) or in frame order ("frames").
+
+    The new updates are built beside the earlier history and replace it only when they are done
+    (`cancel` keeps the updates finished so far); an exception or a killed process leaves the
+    capture as it was (engine/capture/history_journal.py)."""
+    with capture_lock(capture_dir, "lirm reconstruct"):
+        capture = Capture.open(capture_dir)
+        views = prepared_views(capture)
+        cameras = {f: capture.cameras[f] for f in views} if config.order == "spread" else None
+        sets = update_sets(list(views), config.views_per_update, config.updates, cameras)
+        with HistoryBuild(capture) as build:
+            session = _Session(capture, source, config, build)
+            state = source.model.initial_state(1)
+            for number, frames in enumerate(sets, start=1):
+                if cancel is not None and cancel():
+                    break
+                if progress:
+                    progress("update", number - 1, len(sets))
+                state = session.apply(state, number, frames, views)
+                if progress:
+                    progress("update", number, len(sets))
+            if session.records:
+                session.commit(keep=0)
     return ReconstructResult(session.out_dir, session.records, source.trained)
 
 
@@ -122,33 +130,36 @@ def run_next_update(capture_dir: str | Path, source: ModelSource, frames: list[s
                     config: ReconstructConfig = ReconstructConfig()) -> ReconstructResult:
     """One more update with the chosen frames, on top of update `after_update` (default: the latest;
     0 starts afresh). Updates after it are set aside under reconstruction/set_aside/, never deleted:
-    that is stepping back in the history and going on from there."""
+    that is stepping back in the history and going on from there. They are set aside only once the
+    new update is finished."""
     from lirm.engine.model.state_file import load_state
 
-    capture = Capture.open(capture_dir)
-    views = prepared_views(capture)
-    unknown = [f for f in frames if f not in views]
-    if not frames or unknown:
-        raise LirmUserError(f"{capture.root}: {'no frames chosen' if not frames else 'no prepared view for ' + ', '.join(unknown)}; "
-                            f"choose among: {', '.join(views)}")
-    done = len(capture.updates)
-    after = done if after_update is None else after_update
-    if not 0 <= after <= done:
-        raise LirmUserError(f"{capture.root} has {done} updates; cannot continue after update {after}")
-    model = source.model
-    # A refined step holds a field, not tokens: the network goes on from the last update's tokens
-    # before it (a later refinement warm-starts from the refined field again, engine/refine/).
-    base = last_update_entry(capture.updates[:after])
-    if base is None:
-        state = model.initial_state(1)
-    else:
-        state = load_state(capture.root / base["state"], device=str(next(model.parameters()).device))
-        if state.signature != model.config.signature():
-            raise LirmUserError(f"update {base['update']} of {capture.root} was made with other weights ({base.get('weights')}); "
-                                f"pass the same --checkpoint, or start afresh with --after 0")
-    _set_aside_updates_after(capture, after)
-    session = _Session(capture, source, config)
-    session.apply(state, after + 1, list(frames), views)
+    with capture_lock(capture_dir, "lirm reconstruct"):
+        capture = Capture.open(capture_dir)
+        views = prepared_views(capture)
+        unknown = [f for f in frames if f not in views]
+        if not frames or unknown:
+            raise LirmUserError(f"{capture.root}: {'no frames chosen' if not frames else 'no prepared view for ' + ', '.join(unknown)}; "
+                                f"choose among: {', '.join(views)}")
+        done = len(capture.updates)
+        after = done if after_update is None else after_update
+        if not 0 <= after <= done:
+            raise LirmUserError(f"{capture.root} has {done} updates; cannot continue after update {after}")
+        model = source.model
+        # A refined step holds a field, not tokens: the network goes on from the last update's tokens
+        # before it (a later refinement warm-starts from the refined field again, engine/refine/).
+        base = last_update_entry(capture.updates[:after])
+        if base is None:
+            state = model.initial_state(1)
+        else:
+            state = load_state(capture.root / base["state"], device=str(next(model.parameters()).device))
+            if state.signature != model.config.signature():
+                raise LirmUserError(f"update {base['update']} of {capture.root} was made with other weights ({base.get('weights')}); "
+                                    f"pass the same --checkpoint, or start afresh with --after 0")
+        with HistoryBuild(capture) as build:
+            session = _Session(capture, source, config, build)
+            session.apply(state, after + 1, list(frames), views)
+            session.commit(keep=after)
     return ReconstructResult(session.out_dir, session.records, source.trained)
 
 
@@ -166,57 +177,45 @@ def prepared_views(capture: Capture) -> dict:
     return views
 
 
-def _set_aside_updates_after(capture: Capture, keep: int) -> None:
-    """Move the folders of updates after `keep` to reconstruction/set_aside/<time>/ and forget them."""
-    later = capture.updates[keep:]
-    if not later:
-        return
-    import shutil
-
-    aside = capture.root / "reconstruction" / "set_aside" / time.strftime("%Y%m%d-%H%M%S")
-    for entry in later:
-        folder = (capture.root / entry["state"]).parent
-        if folder.is_dir():
-            aside.mkdir(parents=True, exist_ok=True)
-            shutil.move(str(folder), str(aside / folder.name))
-    capture.log("reconstruct", set_aside=[e["update"] for e in later], to=str(aside.relative_to(capture.root)))
-    capture.updates = capture.updates[:keep]
-    capture.save()
-
-
 class _Session:
-    """Applies updates to a capture's reconstruction: state, novel-view pictures, history, summary."""
+    """Builds updates of a capture's reconstruction (state, novel-view pictures) in a HistoryBuild,
+    then commits them with their history entries and summary."""
 
-    def __init__(self, capture: Capture, source: ModelSource, config: ReconstructConfig):
-        self.capture, self.source, self.config = capture, source, config
+    def __init__(self, capture: Capture, source: ModelSource, config: ReconstructConfig, build: HistoryBuild):
+        self.capture, self.source, self.config, self.build = capture, source, config, build
         self.model = source.model
         self.device = next(self.model.parameters()).device
         self.cameras = novel_view_cameras(list(capture.cameras.values()), config.novel_views, config.render_size)
         self.out_dir = capture.root / "reconstruction"
         self.records: list[UpdateRecord] = []
+        self.entries: list[dict] = []
+        self.log: list[dict] = []
 
     def apply(self, state, number: int, frames: list[str], views: dict):
-        model, config, capture = self.model, self.config, self.capture
+        model, config = self.model, self.config
         batch = view_batch([views[f] for f in frames], model.config.image_size, self.device)
         start = time.perf_counter()
         with torch.inference_mode():
             state = model.update(state, batch)
             field = model.decode(state)
         seconds = time.perf_counter() - start
-        update_dir = self.out_dir / f"update_{number:02d}"
-        save_state(state, update_dir / "state.safetensors")
+        folder = self.build.folder(number)
+        save_state(state, folder / "state.safetensors")
         start = time.perf_counter()
-        occupied, skipped = write_pictures(field, self.cameras, config, update_dir, self.device)
+        occupied, skipped = write_pictures(field, self.cameras, config, folder, self.device)
+        state_path = self.build.final_state_path(number)
         record = UpdateRecord(number, frames, seconds, time.perf_counter() - start, occupied, skipped,
-                              str(update_dir.relative_to(capture.root)))
+                              str(Path(state_path).parent))
         self.records.append(record)
-        capture.updates.append({"update": number, "frames": frames, "seconds": round(seconds, 3),
-                                "weights": self.source.description, "trained": self.source.trained,
-                                "state": f"{record.out_dir}/state.safetensors"})
-        capture.log("reconstruct", update=number, frames=frames, weights=self.source.description)
-        capture.save()
-        append_summary(self.out_dir, self.source, config, number, asdict(record))
+        self.entries.append({"update": number, "frames": frames, "seconds": round(seconds, 3),
+                             "weights": self.source.description, "trained": self.source.trained, "state": state_path})
+        self.log.append({"time": time.strftime("%Y-%m-%dT%H:%M:%S"), "action": "reconstruct", "update": number,
+                         "frames": frames, "weights": self.source.description})
         return state
+
+    def commit(self, keep: int) -> None:
+        summary = summary_with(self.out_dir, self.source, self.config, keep, [asdict(r) for r in self.records])
+        self.build.commit(keep, self.entries, summary, self.log)
 
 
 def write_pictures(field, cameras: list, config: ReconstructConfig, folder: Path, device) -> tuple[float, float]:
@@ -233,18 +232,21 @@ def write_pictures(field, cameras: list, config: ReconstructConfig, folder: Path
     return grid.occupied_fraction, float(np.mean(skipped)) if skipped else 0.0
 
 
-def append_summary(out_dir: Path, source: ModelSource, config: ReconstructConfig, number: int, record: dict) -> None:
-    """summary.json: the steps before `number` as they were, then this one's record."""
+def summary_with(out_dir: Path, source: ModelSource, config: ReconstructConfig, keep: int, records: list[dict]) -> dict:
+    """summary.json's content: the steps up to `keep` as they were, then these records."""
     import json
 
     summary_path = out_dir / "summary.json"
     earlier = []
-    if summary_path.is_file() and number > 1:
-        earlier = [u for u in json.loads(summary_path.read_text()).get("updates", []) if u["update"] < number]
-    atomic_write_json(summary_path, {
+    if summary_path.is_file() and keep > 0:
+        try:
+            earlier = [u for u in json.loads(summary_path.read_text()).get("updates", []) if u["update"] <= keep]
+        except (OSError, ValueError, KeyError):
+            earlier = []  # a damaged summary is rebuilt from here on; the history itself is capture.json
+    return {
         "weights": source.description, "trained": source.trained, "warning": source.warning,
-        "preset": source.model.config.name, "config": asdict(config), "updates": earlier + [record],
-    })
+        "preset": source.model.config.name, "config": asdict(config), "updates": earlier + records,
+    }
 
 
 def _write_maps(folder: Path, index: int, maps: dict[str, np.ndarray]) -> None:

@@ -150,3 +150,38 @@ def test_one_more_update_on_chosen_frames_and_stepping_back(lego_capture, tmp_pa
     assert "no prepared view for nope" in capsys.readouterr().err
     assert main(["reconstruct", str(capture), "--frames", frames[0], "--after", "7"] + FAST) == 2
     assert "cannot continue after update 7" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("failure", [KeyboardInterrupt, MemoryError])
+def test_an_interrupted_reconstruct_keeps_the_earlier_results(lego_capture, tmp_path, capsys, monkeypatch, failure):
+    """Issue 20, case 1: Ctrl-C or running out of memory in the middle of a new `lirm reconstruct`
+    leaves the earlier updates listed, in place and usable (export, a next update)."""
+    from lirm.engine.reconstruction import session
+
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    assert main(["reconstruct", str(capture), "--updates", "2"] + FAST) == 0
+    before = Capture.open(capture).updates
+    summary = (capture / "reconstruction" / "summary.json").read_text()
+    states = {e["state"]: (capture / e["state"]).read_bytes() for e in before}
+    real_apply = session._Session.apply
+
+    def failing_apply(self, state, number, frames, views):
+        if number == 2:
+            raise failure()
+        return real_apply(self, state, number, frames, views)
+
+    monkeypatch.setattr(session._Session, "apply", failing_apply)
+    try:
+        assert main(["reconstruct", str(capture), "--updates", "3"] + FAST) != 0  # the CLI reports Ctrl-C
+    except failure:
+        pass
+    monkeypatch.setattr(session._Session, "apply", real_apply)
+    assert Capture.open(capture).updates == before
+    assert {k: (capture / k).read_bytes() for k in states} == states
+    assert (capture / "reconstruction" / "summary.json").read_text() == summary
+    assert not list((capture / "reconstruction").glob(".building_*"))
+    assert not (capture / "reconstruction" / "set_aside").exists()
+    capsys.readouterr()
+    assert main(["export", str(capture), "-o", str(tmp_path / "a.glb"), "--update", "2", "--faces", "500",
+                 "--texture", "64", "--grid", "48"]) == 0
