@@ -76,6 +76,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="refer to the original photos where they are instead of copying them into the capture")
     cap.add_argument("--fix-mask", metavar="FRAME_ID", help="INPUTS is a corrected mask (PNG, 255 = object) for this frame of "
                      "CAPTURE; the correction propagates to the other views")
+    cap.add_argument("--check", action="store_true", help="INPUTS is a capture: check its files against capture.json, "
+                     "make again what can be (crops, masks) and name what cannot")
+    cap.add_argument("--undo-fix-mask", action="store_true", help="INPUTS is a capture: put back the masks the last --fix-mask replaced")
     cap.add_argument("--poses", help="use known poses: a transforms.json (NeRF, instant-ngp, nerfstudio) or a COLMAP model folder")
     cap.add_argument("--masks", default="auto", help="auto (alpha if every photo has one, else automatic), alpha, automatic, or a folder of masks")
     cap.add_argument("--max-side", type=int, default=1280, help="long side of the working images (default 1280)")
@@ -390,6 +393,7 @@ def _run_render(args: argparse.Namespace) -> int:
 def _run_capture(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
+    from .capture.capture_lock import capture_lock
     from .capture.pipeline import CaptureConfig, add_to_capture, run_capture
     from .capture.report import format_capture_report
 
@@ -427,18 +431,44 @@ def _run_capture(args: argparse.Namespace) -> int:
         mask = cv2.imread(args.inputs, cv2.IMREAD_GRAYSCALE)
         if mask is None:
             raise LirmUserError(f"{args.inputs}: cannot read the corrected mask; save it as a PNG, 255 = object")
-        changed = fix_mask(args.capture, args.fix_mask, mask, config)
-        print(f"mask of {changed[0]} replaced; the correction changed {len(changed) - 1} other views: {', '.join(changed[1:]) or 'none'}")
+        with capture_lock(args.capture, "lirm capture --fix-mask"):
+            fixed = fix_mask(args.capture, args.fix_mask, mask, config)
+        print(f"mask of {fixed.fixed} replaced; the correction changed {len(fixed.changed)} other views: "
+              f"{', '.join(fixed.changed) or 'none'}")
+        for frame, lost in fixed.withheld.items():
+            print(f"  not applied to {frame}: it would have removed {lost:.0%} of its mask; correct that view itself "
+                  f"if it is wrong")
+        print(f"  the replaced masks are kept in {fixed.backup}; `lirm capture --undo-fix-mask {args.capture}` puts them back")
+        return 0
+    if args.check or args.resume:
+        from .capture.capture_check import check_capture
+
+        _require_capture(Path(args.inputs))
+        with capture_lock(args.inputs, "lirm capture --check"):
+            checked = check_capture(args.inputs)
+        if args.check or not checked.clean:
+            print("\n".join(checked.lines()))
+        if args.check:
+            return 0 if not checked.unrepairable else 1
+    if args.undo_fix_mask:
+        from .capture.mask_fix import undo_mask_fix
+
+        with capture_lock(args.inputs, "lirm capture --undo-fix-mask"):
+            restored = undo_mask_fix(args.inputs, config.crop)
+        print(f"masks put back as they were before the last correction: {', '.join(restored)}")
         return 0
     try:
         if args.resume:
             from .capture.pipeline import resume_capture
 
-            summary = resume_capture(Path(args.inputs), config, progress=progress)
+            with capture_lock(args.inputs, "lirm capture --resume"):
+                summary = resume_capture(Path(args.inputs), config, progress=progress)
         elif args.add:
             if args.capture is None:
                 raise LirmUserError("lirm capture --add PHOTOS CAPTURE: name the capture folder to extend")
-            summary = add_to_capture(args.capture, source, config, progress=progress)
+            _require_capture(args.capture)
+            with capture_lock(args.capture, "lirm capture --add"):
+                summary = add_to_capture(args.capture, source, config, progress=progress)
         else:
             if args.out is None:
                 raise LirmUserError("lirm capture PHOTOS -o CAPTURE: name the capture folder to create with -o")

@@ -184,6 +184,9 @@ class Capture:
         root = Path(root)
         if root.exists() and any(root.iterdir()):
             if (root / CAPTURE_FILE).exists():
+                if not _finished(root / CAPTURE_FILE):
+                    raise LirmUserError(f"{root} holds a capture that was interrupted before it was finished; finish it "
+                                        f"with `lirm capture --resume {root}` (or choose a new folder)")
                 raise LirmUserError(f"{root} already holds a capture; add photos with `lirm capture --add PHOTOS {root}`")
             raise LirmUserError(f"{root} exists and is not empty; choose a new folder for the capture")
         capture = cls(root=root, settings=dict(settings or {}))
@@ -230,6 +233,17 @@ class Capture:
             with np.load(observations) as data:
                 capture.observations = {k: data[k] for k in data.files}
         return capture
+
+
+def _finished(capture_file: Path) -> bool:
+    """Whether a capture ran its last stage (crops) or stopped for a reason it recorded."""
+    try:
+        data = json.loads(capture_file.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return True  # unreadable: not something --resume could finish; the "already holds" message stands
+    settings = data.get("settings", {})
+    stopped = any(h.get("action") == "stopped" for h in data.get("history", []))
+    return "crops" in settings.get("completed", []) or stopped
 
 
 def _record_dict(record: ImageRecord) -> dict:

@@ -309,6 +309,8 @@ def _check_and_add(path, capture_root, config, ids, by_hash, thumbs, used_origin
             data = f.read()
     except OSError as err:
         return f"cannot be read ({err.strerror or err})"
+    if not data:
+        return "empty file (0 bytes): the copy from the camera or card did not finish; copy it again"
     sha = hashlib.sha256(data).hexdigest()
     if sha in by_hash:
         return f"duplicate of {by_hash[sha]}"
@@ -362,7 +364,7 @@ def _same_bytes(path: Path, data: bytes) -> bool:
         return False
 
 
-def _natural_key(path: Path) -> list:
+def natural_key(path: Path) -> list:
     return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", path.name)]
 
 
@@ -376,7 +378,7 @@ def _list_inputs(inputs) -> tuple[list[Path], list[FileReport]]:
         if not folder.is_dir():
             raise LirmUserError(f"{folder}: no such folder or file; choose the folder that holds the photos")
         files = []
-        for entry in sorted(folder.iterdir(), key=_natural_key):
+        for entry in sorted(folder.iterdir(), key=natural_key):
             if entry.is_dir():
                 if not entry.name.startswith("."):
                     reports.append(FileReport(entry, False, "a folder: only the photos directly inside are imported"))

@@ -26,6 +26,7 @@ __all__ = [
     "load_user_masks",
     "read_mask_file",
     "check_mask",
+    "cut_by_border",
     "mask_iou",
     "remove_regions_outside",
     "propagate_mask_fix",
@@ -167,12 +168,27 @@ def check_mask(mask: np.ndarray) -> str | None:
         return f"not a single-channel mask (shape {np.asarray(mask).shape})"
     frac = float(m.mean())
     if frac < _EMPTY_FRACTION:
-        return "mask is empty: no object found in this view"
+        return "empty: no object found in this view"
     if frac > _FULL_FRACTION:
-        return "mask covers the whole frame: the background was not separated"
+        return "covers the whole frame: the background was not separated"
     if m[0].any() and m[-1].any() and m[:, 0].any() and m[:, -1].any():
-        return "mask touches the border on all four sides: it probably includes background"
+        return "touches the border on all four sides: it probably includes background"
     return None
+
+
+def cut_by_border(mask: np.ndarray, min_share: float = 0.05) -> str | None:
+    """A short message when the object runs out of the picture: the mask covers more than
+    `min_share` of an image border's length (a few pixels of contact are a loose outline, not a cut).
+    Such a view shows only part of the object, and the cropped view would pretend the rest is empty."""
+    m = np.asarray(mask) > 127
+    if m.ndim != 2 or m.size == 0:
+        return None
+    sides = {"top": m[0], "bottom": m[-1], "left": m[:, 0], "right": m[:, -1]}
+    cut = [name for name, line in sides.items() if line.mean() > min_share]
+    if not cut:
+        return None
+    return (f"the object is cut off by the image border ({', '.join(cut)}): step back or re-frame so that all "
+            f"of it is in the picture")
 
 
 def mask_iou(a: np.ndarray, b: np.ndarray) -> float:

@@ -22,8 +22,8 @@ from .auto_mask import AutoMaskConfig, automatic_masks
 from .capture_folder import Capture, FrameState
 from .colmap_posing import ColmapConfig, extend_colmap_pose, pose_with_colmap
 from .crop import CropConfig, EmptyMaskError, prepare_view
-from .ingest import Cancelled, IngestConfig, ingest_photos
-from .masks import check_mask, load_user_masks, mask_from_alpha, propagate_mask_fix
+from .ingest import Cancelled, IngestConfig, ingest_photos, natural_key
+from .masks import check_mask, cut_by_border, load_user_masks, mask_from_alpha, propagate_mask_fix
 from .normalize import NormalizeConfig, estimate_normalization
 from .pose_import import import_colmap_model, import_transforms_json
 from .records import PosingResult
@@ -64,11 +64,63 @@ class CaptureSummary:
 
 def run_capture(inputs: str | Path | int, out: str | Path, config: CaptureConfig = CaptureConfig(),
                 progress: Progress | None = None, cancel: Callable[[], bool] | None = None) -> CaptureSummary:
-    """Create a capture from a folder of photos, a video file or a camera index."""
+    """Create a capture from a folder of photos, a video file or a camera index.
+
+    Nothing is left behind when there is no input to make a capture of (a missing folder, no photo
+    in it, a video that does not decode, a camera that does not open): the folder is removed again
+    (or emptied, if it existed empty), so that the retry starts clean."""
+    out = Path(out)
+    _check_input_exists(inputs, out)
+    existed = out.exists()
     capture = Capture.create(out, settings=_settings(config))
     capture.settings["inputs"] = str(inputs)
-    _ingest(capture, inputs, config, progress, cancel)
+    try:
+        _ingest(capture, inputs, config, progress, cancel)
+        if not capture.frames:
+            raise LirmUserError(_no_photos_message(inputs, capture.reports))
+    except (LirmUserError, Cancelled):
+        if not capture.frames:
+            _remove_new_capture(out, existed)
+        raise
     return _finish(capture, config, progress, cancel, new_frames=None)
+
+
+def _check_input_exists(inputs, out: Path) -> None:
+    if isinstance(inputs, int):
+        return
+    path = Path(inputs)
+    if not path.exists():
+        raise LirmUserError(f"{path}: no such folder, photo or video; check the path (nothing was created)")
+    try:
+        inside = out.resolve().is_relative_to(path.resolve()) and path.is_dir()
+    except OSError:
+        inside = False
+    if inside:
+        raise LirmUserError(f"-o {out} is inside the photo folder {path}: its images would be imported as photos "
+                            f"next time; choose a capture folder outside it")
+
+
+def _no_photos_message(inputs, reports) -> str:
+    files = [r for r in reports if r.path.is_file()]
+    if not files:
+        return (f"{inputs}: no photos found (the folder holds no files); put the JPEG or PNG photos directly "
+                f"in it, or name a video or camera:N")
+    reasons = "; ".join(f"{r.path.name}: {r.reason}" for r in files[:3])
+    more = f" (and {len(files) - 3} more)" if len(files) > 3 else ""
+    return f"{inputs}: none of its {len(files)} files is a usable photo ({reasons}{more})"
+
+
+def _remove_new_capture(out: Path, existed: bool) -> None:
+    import shutil
+
+    if not existed:
+        shutil.rmtree(out, ignore_errors=True)
+        return
+    for entry in out.iterdir():  # it was empty before this run: only what this run wrote is there
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry, ignore_errors=True)
+        else:
+            entry.unlink(missing_ok=True)
 
 
 def resume_capture(root: str | Path, config: CaptureConfig = CaptureConfig(), progress: Progress | None = None,
@@ -93,32 +145,11 @@ def add_to_capture(root: str | Path, inputs: str | Path | int, config: CaptureCo
     return _finish(capture, config, progress, cancel, new_frames=new)
 
 
-def fix_mask(root: str | Path, frame_id: str, mask: np.ndarray, config: CaptureConfig = CaptureConfig()) -> list[str]:
-    """The user corrected one view's mask: keep it, carry the correction to the other views through
-    the visual hull (they only lose regions the corrected view rules out), and re-crop what changed.
-    Returns the frames whose masks changed, the corrected one first."""
-    capture = Capture.open(root)
-    if frame_id not in capture.cameras:
-        raise LirmUserError(f"frame {frame_id} is not posed in {root}; posed frames: {', '.join(sorted(capture.cameras))}")
-    camera = capture.cameras[frame_id]
-    mask = np.asarray(mask)
-    if mask.shape != (camera.height, camera.width):
-        raise LirmUserError(f"the corrected mask is {mask.shape[1]}x{mask.shape[0]} but frame {frame_id} is "
-                            f"{camera.width}x{camera.height}; draw it on the capture's working image")
-    mask = np.where(mask > 127, 255, 0).astype(np.uint8)
-    masks = {f: m for f in capture.cameras if (m := capture.read_mask(f)) is not None}
-    new_masks, changed = propagate_mask_fix(frame_id, mask, capture.cameras, masks, radius=config.normalize.target_radius)
-    capture.write_mask(frame_id, mask, source="fixed", status=check_mask(mask) or "ok")
-    for f in changed:
-        if f != frame_id:
-            capture.write_mask(f, new_masks[f], source="fixed", status=check_mask(new_masks[f]) or "ok")
-    touched = [frame_id] + [f for f in changed if f != frame_id]
-    for f in touched:
-        if capture.frames[f].mask_status == "ok":
-            capture.write_prepared(prepare_view(f, capture.read_image(f)[:, :, :3], capture.read_mask(f), capture.cameras[f], config.crop))
-    capture.log("fix mask", frame=frame_id, propagated_to=[f for f in touched if f != frame_id])
-    capture.save()
-    return touched
+def fix_mask(root: str | Path, frame_id: str, mask: np.ndarray, config: CaptureConfig = CaptureConfig()):
+    """The user corrected one view's mask: see engine/capture/mask_fix.py (guards, backups, undo)."""
+    from .mask_fix import fix_mask as fix
+
+    return fix(root, frame_id, mask, radius=config.normalize.target_radius, crop=config.crop)
 
 
 # ---- stages ---------------------------------------------------------------------------------------
@@ -132,13 +163,32 @@ def _ingest(capture: Capture, inputs, config: CaptureConfig, progress, cancel) -
         path = Path(inputs)
         if not path.exists():
             raise LirmUserError(f"{path}: no such folder, photo or video")
-        records, reports = ingest_photos(path, capture.root, config.ingest, existing=existing, progress=stage_progress, cancel=cancel)
+        records, reports = ingest_photos(_photos_without_masks(path, config.masks), capture.root, config.ingest,
+                                         existing=existing, progress=stage_progress, cancel=cancel)
     for record in records:
         capture.frames[record.frame_id] = FrameState(record)
     capture.reports.extend(reports)
     capture.log("ingest", inputs=str(inputs), accepted=len(records), skipped=sum(not r.accepted for r in reports))
     capture.settings.setdefault("timings", {})["ingest"] = round(time.perf_counter() - start, 3)
     capture.save()
+
+
+def _photos_without_masks(path: Path, masks: str):
+    """The photo folder, or its files without the mask folder's (`--masks FOLDER` inside or equal to
+    the photo folder): masks are neither imported nor reported as skipped photos."""
+    mask_folder = Path(masks) if masks not in ("auto", "alpha", "automatic") else None
+    if mask_folder is None or not path.is_dir() or not mask_folder.is_dir():
+        return path
+    mask_folder = mask_folder.resolve()
+    if mask_folder != path.resolve() and mask_folder.parent != path.resolve():
+        return path
+    mask_names = {p.name for p in mask_folder.iterdir()} if mask_folder == path.resolve() else set()
+    return [p for p in sorted(path.iterdir(), key=natural_key)
+            if p.resolve() != mask_folder and not (p.name in mask_names and _looks_like_mask_name(p.name))]
+
+
+def _looks_like_mask_name(name: str) -> bool:
+    return "mask" in name.lower()
 
 
 def _finish(capture: Capture, config: CaptureConfig, progress, cancel, new_frames: list[str] | None) -> CaptureSummary:
@@ -265,7 +315,7 @@ def _masks(capture: Capture, config: CaptureConfig, progress, cancel) -> None:
         if f not in masks:
             capture.frames[f].mask_status = "no mask"
             continue
-        problem = check_mask(masks[f])
+        problem = check_mask(masks[f]) or cut_by_border(masks[f])
         capture.write_mask(f, masks[f], source=source, status=problem or "ok")
     capture.log("masks", source=source, ok=sum(capture.frames[f].mask_status == "ok" for f in posed))
     capture.save()

@@ -42,7 +42,7 @@ from lirm.engine.refine.refine_views import RefineViews
 from lirm.engine.refine.refiner import RefineTick, refine_field
 
 from .novel_views import novel_view_cameras
-from .session import ReconstructConfig, last_update_entry, prepared_views, summary_with, write_pictures
+from .session import ReconstructConfig, last_update_entry, open_checked, prepared_views, summary_with, write_pictures
 
 INIT_CHOICES = ("auto", "lirm", "hull", "scratch")
 
@@ -136,7 +136,7 @@ def run_refine(capture_dir: str | Path, source: ModelSource, config: RefineConfi
 
 def _refine_locked(capture_dir, source: ModelSource, config: RefineConfig, init: str, holdout_every: int | None,
                    render: ReconstructConfig, progress, cancel, live_path: Path | None, live_every: float) -> RefineStepResult:
-    capture = Capture.open(capture_dir)
+    capture = open_checked(capture_dir)
     views_by_frame = prepared_views(capture)
     fitted, held = holdout_split(list(views_by_frame), holdout_every)
     views = RefineViews.from_prepared([views_by_frame[f] for f in fitted])

@@ -106,7 +106,7 @@ def run_reconstruction(capture_dir: str | Path, source: ModelSource, config: Rec
     (`cancel` keeps the updates finished so far); an exception or a killed process leaves the
     capture as it was (engine/capture/history_journal.py)."""
     with capture_lock(capture_dir, "lirm reconstruct"):
-        capture = Capture.open(capture_dir)
+        capture = open_checked(capture_dir)
         views = prepared_views(capture)
         cameras = {f: capture.cameras[f] for f in views} if config.order == "spread" else None
         sets = update_sets(list(views), config.views_per_update, config.updates, cameras)
@@ -135,7 +135,7 @@ def run_next_update(capture_dir: str | Path, source: ModelSource, frames: list[s
     from lirm.engine.model.state_file import load_state
 
     with capture_lock(capture_dir, "lirm reconstruct"):
-        capture = Capture.open(capture_dir)
+        capture = open_checked(capture_dir)
         views = prepared_views(capture)
         unknown = [f for f in frames if f not in views]
         if not frames or unknown:
@@ -167,6 +167,21 @@ def last_update_entry(entries: list[dict]) -> dict | None:
     """The last history entry made by a LIRM update (not a refinement), or None."""
     updates = [e for e in entries if e.get("kind", "update") == "update"]
     return updates[-1] if updates else None
+
+
+def open_checked(capture_dir: str | Path) -> Capture:
+    """The capture, after checking it against capture.json: what can be made again (crops, masks)
+    is, and what cannot is named on the log, so that a damaged capture is never silently smaller."""
+    import logging
+
+    from lirm.engine.capture.capture_check import check_capture
+
+    report = check_capture(capture_dir)
+    if not report.clean:
+        log = logging.getLogger("lirm")
+        for line in report.lines():
+            log.warning("%s: %s", capture_dir, line.strip())
+    return Capture.open(capture_dir)
 
 
 def prepared_views(capture: Capture) -> dict:
