@@ -11,3 +11,8 @@ class AssetLoadError(LirmUserError):
 
 class EnvironmentLoadError(LirmUserError):
     """An HDR environment file could not be loaded."""
+
+
+class LirmResourceError(LirmUserError):
+    """Not enough memory or disk for what was asked: `str(err)` says how much is needed, how much
+    there is, and what to lower or free."""

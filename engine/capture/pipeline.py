@@ -22,6 +22,7 @@ from .auto_mask import AutoMaskConfig, automatic_masks
 from .capture_folder import Capture, FrameState
 from .colmap_posing import ColmapConfig, extend_colmap_pose, pose_with_colmap
 from .crop import CropConfig, EmptyMaskError, prepare_view
+from .disk_space import require_free_space, stage_bytes
 from .ingest import Cancelled, IngestConfig, ingest_photos, natural_key
 from .masks import check_mask, cut_by_border, load_user_masks, mask_from_alpha, propagate_mask_fix
 from .normalize import NormalizeConfig, estimate_normalization
@@ -32,6 +33,7 @@ from .video_frames import VideoConfig, select_video_frames
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".webm", ".m4v")
 STAGES = ("ingest", "pose", "normalize", "masks", "crops")
+STAGE_WORDS = {"pose": "pose the photos (COLMAP)", "masks": "write the masks", "crops": "prepare the network's crops"}
 
 Progress = Callable[[str, int, int], None]  # (stage, done, total)
 
@@ -163,6 +165,10 @@ def _ingest(capture: Capture, inputs, config: CaptureConfig, progress, cancel) -
         path = Path(inputs)
         if not path.exists():
             raise LirmUserError(f"{path}: no such folder, photo or video")
+        candidates = [p for p in (path.iterdir() if path.is_dir() else [path]) if p.is_file()]
+        require_free_space(capture.root, stage_bytes("ingest", len(candidates), config.ingest.max_side, config.crop.size,
+                                                     sum(p.stat().st_size for p in candidates) if config.ingest.copy_originals else 0),
+                           "import the photos")
         records, reports = ingest_photos(_photos_without_masks(path, config.masks), capture.root, config.ingest,
                                          existing=existing, progress=stage_progress, cancel=cancel)
     for record in records:
@@ -197,7 +203,7 @@ def _finish(capture: Capture, config: CaptureConfig, progress, cancel, new_frame
         return _summary(capture)
     completed = capture.settings.get("completed", [])
     if "pose" not in completed or new_frames:
-        _timed(capture, "pose", lambda: _pose(capture, config, progress, cancel, new_frames))
+        _timed(capture, config, "pose", lambda: _pose(capture, config, progress, cancel, new_frames))
     if not capture.cameras:
         capture.log("stopped", reason="no photo could be posed")
         capture.save()
@@ -206,12 +212,15 @@ def _finish(capture: Capture, config: CaptureConfig, progress, cancel, new_frame
                        ("masks", lambda: _masks(capture, config, progress, cancel)),
                        ("crops", lambda: _crops(capture, config, progress, cancel))):
         if stage not in capture.settings.get("completed", []) or new_frames:
-            _timed(capture, stage, run)
+            _timed(capture, config, stage, run)
     return _summary(capture)
 
 
-def _timed(capture: Capture, stage: str, run: Callable[[], None]) -> None:
-    """Run a stage, then record its wall time (capture.settings["timings"]) and mark it complete."""
+def _timed(capture: Capture, config: CaptureConfig, stage: str, run: Callable[[], None]) -> None:
+    """Run a stage (after checking the disk has room for what it writes), then record its wall time
+    (capture.settings["timings"]) and mark it complete."""
+    needed = stage_bytes(stage, len(capture.frames), config.ingest.max_side, config.crop.size)
+    require_free_space(capture.root, needed, STAGE_WORDS.get(stage, stage))
     start = time.perf_counter()
     run()
     capture.settings.setdefault("timings", {})[stage] = round(time.perf_counter() - start, 3)

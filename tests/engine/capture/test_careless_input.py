@@ -218,3 +218,38 @@ def test_what_cannot_be_made_again_is_named(lego_capture, tmp_path, capsys):
     assert main(["capture", "--check", str(capture)]) == 1
     out = capsys.readouterr().out
     assert f"cannot be repaired: {frame}" in out and "lirm capture --add" in out
+
+
+# ---- case 7: a full disk stops the capture with a sentence and a folder that resumes ---------------------
+def test_a_full_disk_stops_before_the_stage_and_resume_goes_on(tmp_path, shared_data, capsys, monkeypatch):
+    """The disk is full from the pose stage on (the space query answers as a full disk would; filling a
+    real disk is not possible in a test): the capture stops before COLMAP with exit 4, says how much
+    space it needs, and `--resume` finishes it once there is room."""
+    from collections import namedtuple
+
+    from lirm.engine.capture import disk_space, pipeline
+
+    photos = _lego_photos(shared_data, tmp_path / "photos", 4)
+    lego = shared_data / "synth_nerf_lego_train"
+    out = tmp_path / "c"
+    real_usage = disk_space.shutil.disk_usage
+    Usage = namedtuple("Usage", "total used free")
+    real_ingest = pipeline.ingest_photos
+
+    def ingest_then_fill(*args, **kwargs):
+        result = real_ingest(*args, **kwargs)
+        monkeypatch.setattr(disk_space.shutil, "disk_usage", lambda p: Usage(10 * 2**30, 10 * 2**30 - 2**20, 2**20))
+        return result
+
+    monkeypatch.setattr(pipeline, "ingest_photos", ingest_then_fill)
+    assert main(["capture", str(photos), "-o", str(out), "--masks", "alpha", "--size", "32",
+                 "--poses", str(lego / "transforms_train.json")]) == 4
+    err = capsys.readouterr().err
+    assert "not enough free disk space to pose the photos" in err and "1 MB are free" in err
+    assert f"lirm capture --resume {out}" in err
+    assert not list(out.rglob("*-wal")) and not list(out.rglob("*-shm"))
+    monkeypatch.setattr(disk_space.shutil, "disk_usage", real_usage)
+    monkeypatch.setattr(pipeline, "ingest_photos", real_ingest)
+    assert main(["capture", "--resume", str(out), "--masks", "alpha", "--size", "32",
+                 "--poses", str(lego / "transforms_train.json")]) == 0
+    assert "network views prepared: 4" in capsys.readouterr().out
