@@ -182,7 +182,7 @@ class Capture:
     @classmethod
     def create(cls, root: str | Path, settings: dict | None = None) -> "Capture":
         root = Path(root)
-        if root.exists() and any(root.iterdir()):
+        if root.exists() and any(root.iterdir()) and not _only_leftovers_of_a_killed_create(root):
             if (root / CAPTURE_FILE).exists():
                 if not _finished(root / CAPTURE_FILE):
                     raise LirmUserError(f"{root} holds a capture that was interrupted before it was finished; finish it "
@@ -233,6 +233,14 @@ class Capture:
             with np.load(observations) as data:
                 capture.observations = {k: data[k] for k in data.files}
         return capture
+
+
+def _only_leftovers_of_a_killed_create(root: Path) -> bool:
+    """A folder holding only what `create` writes before capture.json exists (a run killed in its
+    first moments): starting again there loses nothing."""
+    ours = {"points.npy", "observations.npz", "transforms.json", ".lock"}
+    return not (root / CAPTURE_FILE).exists() and all(
+        p.is_file() and (p.name in ours or ".tmp" in p.name) for p in root.iterdir())
 
 
 def _finished(capture_file: Path) -> bool:
