@@ -477,7 +477,7 @@ def _run_capture(args: argparse.Namespace) -> int:
         for bar in bars.values():
             bar.close()
     print(format_capture_report(summary, reference=args.reference))
-    return 0 if summary.usable else 1
+    return 0 if summary.reconstructable else 1
 
 
 def _run_reconstruct(args: argparse.Namespace) -> int:

@@ -63,6 +63,11 @@ class CaptureSummary:
     def usable(self) -> bool:
         return self.registered > 0
 
+    @property
+    def reconstructable(self) -> bool:
+        """Posed and with at least one prepared view (what `lirm reconstruct` needs)."""
+        return self.registered > 0 and self.prepared > 0
+
 
 def run_capture(inputs: str | Path | int, out: str | Path, config: CaptureConfig = CaptureConfig(),
                 progress: Progress | None = None, cancel: Callable[[], bool] | None = None) -> CaptureSummary:

@@ -31,6 +31,9 @@ def format_capture_report(summary: CaptureSummary, reference: Path | None = None
     if not summary.usable:
         lines.append("  nothing could be posed: take photos with more overlap (about 20-30 degrees between shots), "
                      "more texture in view, or pass known poses with --poses")
+    elif summary.prepared == 0 and "crops" in capture.settings.get("completed", []):
+        lines.append("  no view could be prepared, so there is nothing to reconstruct: every mask failed (see above); "
+                     "look at masks/, correct one with `lirm capture --fix-mask`, or pass your own with --masks FOLDER")
     elif summary.registered < summary.accepted:
         lines.append("  the photos that did not register can be retaken or removed; the capture is usable without them")
     return "\n".join(lines)

@@ -253,3 +253,16 @@ def test_a_full_disk_stops_before_the_stage_and_resume_goes_on(tmp_path, shared_
     assert main(["capture", "--resume", str(out), "--masks", "alpha", "--size", "32",
                  "--poses", str(lego / "transforms_train.json")]) == 0
     assert "network views prepared: 4" in capsys.readouterr().out
+
+
+def test_a_capture_with_nothing_to_reconstruct_is_not_a_success(tmp_path, shared_data, capsys):
+    photos = _lego_photos(shared_data, tmp_path / "photos", 3)
+    masks = tmp_path / "masks"
+    masks.mkdir()
+    for p in photos.glob("*.png"):
+        cv2.imwrite(str(masks / p.name), np.zeros((800, 800), np.uint8))
+    lego = shared_data / "synth_nerf_lego_train"
+    assert main(["capture", str(photos), "-o", str(tmp_path / "c"), "--masks", str(masks), "--size", "32",
+                 "--poses", str(lego / "transforms_train.json")]) == 1
+    out = capsys.readouterr().out
+    assert "network views prepared: 0" in out and "no view could be prepared" in out and "--fix-mask" in out
