@@ -302,6 +302,7 @@ def _grabcut(
             if not (np.any(small_labels % 2 == 1) and np.any(small_labels % 2 == 0)):
                 small, small_labels = image, labels.copy()
             bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
+            cv2.setRNGSeed(0)  # GrabCut seeds its colour mixtures by k-means on OpenCV's global generator
             cv2.grabCut(small, small_labels, None, bgd, fgd, 1, cv2.GC_INIT_WITH_MASK)
         else:
             bgd, fgd = models[0].copy(), models[1].copy()

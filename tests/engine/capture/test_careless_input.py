@@ -266,3 +266,4 @@ def test_a_capture_with_nothing_to_reconstruct_is_not_a_success(tmp_path, shared
                  "--poses", str(lego / "transforms_train.json")]) == 1
     out = capsys.readouterr().out
     assert "network views prepared: 0" in out and "no view could be prepared" in out and "--fix-mask" in out
+
