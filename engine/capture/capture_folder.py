@@ -49,6 +49,7 @@ class FrameState:
     mask_source: str | None = None  # alpha | user | auto | fixed
     update: int | None = None  # the LIRM update that consumed this view
     pinhole_image: Path | None = None  # undistorted copy (relative), when the pose has lens distortion
+    mask_warning: str | None = None  # a usable mask that may be wrong (e.g. cut by the image border)
 
 
 @dataclass
@@ -123,10 +124,18 @@ class Capture:
         path = self.prepared_path(frame_id)
         if not path.exists():
             return None
-        with np.load(path) as data:
-            camera = Camera.from_dict(json.loads(str(data["camera"])))
-            return PreparedView(frame_id, data["image_masked"], data["image_bg"], data["mask"], data["plucker"],
-                                camera, tuple(int(v) for v in data["crop_box"]))
+        import zipfile
+        import zlib
+
+        try:
+            with np.load(path) as data:
+                camera = Camera.from_dict(json.loads(str(data["camera"])))
+                return PreparedView(frame_id, data["image_masked"], data["image_bg"], data["mask"], data["plucker"],
+                                    camera, tuple(int(v) for v in data["crop_box"]))
+        except (zipfile.BadZipFile, zlib.error, OSError, ValueError, KeyError, EOFError, TypeError) as err:
+            raise LirmUserError(f"the prepared view {path} is truncated or damaged ({type(err).__name__}: {err}); "
+                                f"run `lirm capture --check {self.root}` to cut it again from its working image "
+                                f"(or delete it to go on without this view)") from None
 
     def log(self, action: str, **details) -> None:
         self.history.append({"time": time.strftime("%Y-%m-%dT%H:%M:%S"), "action": action, **details})
@@ -142,7 +151,7 @@ class Capture:
             "settings": self.settings,
             "frames": [
                 {**_record_dict(state.record), "pose_status": state.pose_status, "mask_status": state.mask_status,
-                 "mask_source": state.mask_source, "update": state.update,
+                 "mask_source": state.mask_source, "mask_warning": state.mask_warning, "update": state.update,
                  "pinhole_image": None if state.pinhole_image is None else state.pinhole_image.as_posix()}
                 for _, state in sorted(self.frames.items())
             ],
@@ -220,7 +229,8 @@ class Capture:
             )
             pinhole = f.get("pinhole_image")
             capture.frames[record.frame_id] = FrameState(record, f.get("pose_status", "not posed"), f.get("mask_status", "no mask"),
-                                                         f.get("mask_source"), f.get("update"), Path(pinhole) if pinhole else None)
+                                                         f.get("mask_source"), f.get("update"), Path(pinhole) if pinhole else None,
+                                                         f.get("mask_warning"))
         capture.cameras = {k: Camera.from_dict(v) for k, v in data.get("cameras", {}).items()}
         if data.get("normalization"):
             capture.normalization = Normalization.from_dict(data["normalization"])

@@ -187,8 +187,8 @@ def cut_by_border(mask: np.ndarray, min_share: float = 0.05) -> str | None:
     cut = [name for name, line in sides.items() if line.mean() > min_share]
     if not cut:
         return None
-    return (f"the object is cut off by the image border ({', '.join(cut)}): step back or re-frame so that all "
-            f"of it is in the picture")
+    return (f"the mask runs out of the picture ({', '.join(cut)} border): the object is cut off (step back next "
+            f"time) or the mask took in background")
 
 
 def mask_iou(a: np.ndarray, b: np.ndarray) -> float:

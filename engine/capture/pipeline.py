@@ -308,8 +308,11 @@ def _masks(capture: Capture, config: CaptureConfig, progress, cancel) -> None:
         mask_config = config.auto_mask
         if capture.normalization is not None and len(capture.points):
             is_object = capture.normalization.object_point_mask(capture.points, radius)
-            if capture.normalization.plane is not None and mask_config.ball_probable_fraction == 0:
-                # The object was sized from points above a known floor: its ball is a good prior.
+            plane = capture.normalization.plane
+            if plane is not None and abs(float(plane[0][2])) > 0.9 and mask_config.ball_probable_fraction == 0:
+                # The object was sized from points above a known floor: its ball is a good prior. Not
+                # for a wall (the fox, a mounted head): the ball in front of a wall takes in picture
+                # frames and the wall beside the object, and the points alone outline it better.
                 mask_config = replace(mask_config, ball_probable_fraction=config.normalize.fill)
         masks = automatic_masks(rgb, {f: capture.cameras[f] for f in posed}, capture.points, radius=radius,
                                 config=mask_config, progress=_stage(progress, "masks"), point_is_object=is_object,
@@ -329,8 +332,12 @@ def _masks(capture: Capture, config: CaptureConfig, progress, cancel) -> None:
         if f not in masks:
             capture.frames[f].mask_status = "no mask"
             continue
-        problem = check_mask(masks[f]) or cut_by_border(masks[f])
+        problem = check_mask(masks[f])
         capture.write_mask(f, masks[f], source=source, status=problem or "ok")
+        # Cut by the border: the view still holds valid rays (what is outside the frame is simply
+        # not seen), but either the object was framed too tight or the mask took in background that
+        # runs out of the picture; it is used, and named in the report.
+        capture.frames[f].mask_warning = None if problem else cut_by_border(masks[f])
     capture.log("masks", source=source, ok=sum(capture.frames[f].mask_status == "ok" for f in posed))
     capture.save()
 

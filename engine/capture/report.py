@@ -22,6 +22,11 @@ def format_capture_report(summary: CaptureSummary, reference: Path | None = None
     for frame_id, state in sorted(capture.frames.items()):
         if frame_id in capture.cameras and state.mask_status != "ok":
             lines.append(f"    {state.record.original.name} ({frame_id}): mask {state.mask_status}")
+    warned = [(f, s) for f, s in sorted(capture.frames.items()) if f in capture.cameras and s.mask_status == "ok" and s.mask_warning]
+    if warned:
+        lines.append(f"  masks used with a warning: {len(warned)} (check them in masks/; `lirm capture --fix-mask` corrects one)")
+        for frame_id, state in warned:
+            lines.append(f"    {state.record.original.name} ({frame_id}): {state.mask_warning}")
     lines.append(f"  network views prepared: {summary.prepared}")
     timings = capture.settings.get("timings", {})
     if timings:

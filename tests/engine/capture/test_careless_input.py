@@ -143,7 +143,7 @@ def test_an_interrupted_capture_is_resumed_not_added_to(lego_capture, tmp_path, 
     data = json.loads((capture / "capture.json").read_text())
     data["settings"]["completed"] = ["pose", "normalize"]  # as a killed run leaves it
     (capture / "capture.json").write_text(json.dumps(data))
-    assert main(["capture", str(tmp_path), "-o", str(capture)]) == 3
+    assert main(["capture", str(shared_data / "synth_nerf_lego_train" / "train"), "-o", str(capture)]) == 3
     err = capsys.readouterr().err
     assert f"lirm capture --resume {capture}" in err and "--add" not in err
 
@@ -178,7 +178,7 @@ def test_an_object_cut_by_the_image_border_is_flagged():
     assert cut_by_border(mask) is None
     mask[30:70, 0:40] = 255  # runs out of the left edge
     message = cut_by_border(mask)
-    assert message and "left" in message and "step back" in message
+    assert message and "left" in message and "runs out of the picture" in message
     mask2 = np.zeros((100, 120), np.uint8)
     mask2[99, 60:62] = 255  # two pixels of contact: a loose outline, not a cut
     assert cut_by_border(mask2) is None
@@ -267,3 +267,20 @@ def test_a_capture_with_nothing_to_reconstruct_is_not_a_success(tmp_path, shared
     out = capsys.readouterr().out
     assert "network views prepared: 0" in out and "no view could be prepared" in out and "--fix-mask" in out
 
+
+
+def test_a_view_whose_mask_runs_out_of_the_picture_is_used_and_named(tmp_path, shared_data, capsys):
+    """Lego renders whose object reaches the left edge (a band of it painted in, as if the photo had
+    been framed too tight): the views stay usable (their rays are valid) and the report names each."""
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    lego = shared_data / "synth_nerf_lego_train"
+    for i in range(0, 20, 5):
+        image = cv2.imread(str(lego / "train" / f"r_{i}.png"), cv2.IMREAD_UNCHANGED)
+        image[360:440, :420] = (90, 90, 90, 255)  # a bar from the left border into the object
+        cv2.imwrite(str(photos / f"r_{i}.png"), image)
+    assert main(["capture", str(photos), "-o", str(tmp_path / "c"), "--masks", "alpha", "--size", "32",
+                 "--poses", str(lego / "transforms_train.json")]) == 0
+    out = capsys.readouterr().out
+    assert "network views prepared: 4" in out and "masks used with a warning: 4" in out
+    assert out.count("runs out of the picture (left border)") == 4
