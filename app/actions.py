@@ -48,18 +48,39 @@ class AppActions:
         except (LirmUserError, OSError, ValueError) as err:
             self.state.say(f"cannot open {path}: {err}. Open a folder made by `lirm capture` or import photos.", "error")
             return False
-        self.state.capture_dir = capture.root
-        self.state.guidance, self.state.coverage = None, None
+        self.state.capture_dir = Path(capture.root).resolve()  # absolute: paths saved in it are made relative to it
+        self.state.guidance, self.state.coverage, self.state.last_export = None, None, None
         self.state.load_choices()
         self._read_capture(capture)
         self._load_guidance()
-        self.state.say(f"opened {capture.root}: {len(capture.cameras)} posed views, {len(capture.updates)} updates")
+        self.state.say(f"opened {self.state.capture_dir}: {len(capture.cameras)} posed views, {len(capture.updates)} updates")
         from .recent import remember_capture
 
-        remember_capture(capture.root)
+        remember_capture(self.state.capture_dir)
+        try:
+            self._show_update(self.state.viewing_update)
+            self._notify("capture")
+        except Exception as err:
+            if not self.state.choices_restored:
+                raise
+            # Whatever the saved state holds, opening does not fail on it: drop it and open as new.
+            try:
+                self.drop_restored_choices(f"{type(err).__name__}: {err}")
+            except Exception as again:
+                self.state.say(f"{self.state.capture_dir} is open but cannot be shown: {type(again).__name__}: {again}", "error")
+        return True
+
+    def drop_restored_choices(self, why: str) -> None:
+        """The window's state saved in the capture cannot be shown: back to the default settings, said why
+        (the file is rewritten at the next change)."""
+        self.state.choices_restored = False
+        self.state.say(f"the window's saved state in {self.state.capture_dir} could not be restored ({why}); "
+                       "it was dropped and the capture opens with the default settings", "warning")
+        from .app_state import SavedChoices
+
+        self.state.choices = SavedChoices()
         self._show_update(self.state.viewing_update)
         self._notify("capture")
-        return True
 
     def refresh(self) -> None:
         if self.state.capture_dir is not None:
@@ -324,7 +345,10 @@ class AppActions:
         self._changed_view()
 
     def set_environment(self, name_or_path: str) -> None:
-        self.state.choices.view.environment = str(name_or_path)
+        from .app_state import BUILTIN_ENVIRONMENTS
+
+        name = str(name_or_path)
+        self.state.choices.view.environment = name if name in BUILTIN_ENVIRONMENTS else str(Path(name).expanduser().resolve())
         self._changed_view("environment")
 
     def set_rotation(self, degrees: float) -> None:
@@ -361,7 +385,7 @@ class AppActions:
         settings.faces = faces or settings.faces
         settings.texture = texture or settings.texture
         settings.grid = grid or settings.grid
-        out = Path(path or settings.path or self.state.capture_dir / "export" / "asset.glb")
+        out = self.state.capture_path(path or settings.path or self.default_export_path())  # relative: in the capture
         settings.path = str(out)
         try:
             out.parent.mkdir(parents=True, exist_ok=True)  # the user named it in the panel: make its folder
@@ -382,13 +406,19 @@ class AppActions:
                 self.state.say("export cancelled; any earlier file there is untouched")
         return self._start("export", f"exporting {out.name}", args, done, detach_on_exit=True)
 
+    def default_export_path(self) -> Path:
+        return self.state.capture_dir / "export" / "asset.glb"
+
     def export_turntable(self, folder: str | Path | None = None) -> Job | None:
         """An image sequence orbiting the last exported asset under the current lighting."""
-        asset = self.state.last_export or (Path(self.state.choices.export.path) if self.state.choices.export.path else None)
-        if asset is None or not asset.is_file():
-            self.state.say("export the asset first; the turntable shows the exported file", "warning")
+        if self.state.capture_dir is None:
+            self.state.say("open or import a capture first", "warning")
             return None
-        out = Path(folder or asset.with_name(asset.stem + "_turntable"))
+        asset = self.state.last_export or self.state.capture_path(self.state.choices.export.path or self.default_export_path())
+        if not asset.is_file():
+            self.state.say(f"export the asset first; the turntable shows the exported file ({asset} is not there yet)", "warning")
+            return None
+        out = self.state.capture_path(folder) if folder else asset.with_name(asset.stem + "_turntable")
         view = self.state.choices.view
         args = ["render", str(asset), "--env", view.environment, "--views", str(self.state.choices.export.turntable_frames),
                 "--size", "512x512", "-o", str(out)]

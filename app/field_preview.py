@@ -38,6 +38,14 @@ class FieldPreview:
     def busy(self) -> bool:
         return self._thread is not None and self._thread.is_alive()
 
+    def close(self, timeout: float = 60.0) -> None:
+        """Drop what is asked and wait for the render under way (the window is closing: a torch thread
+        still running when the interpreter exits aborts it)."""
+        with self._lock:
+            self._wanted = None
+        if self._thread is not None:
+            self._thread.join(timeout)
+
     def request(self, capture_dir: Path, update: int | Path, checkpoint, camera: Camera, world_from_capture: np.ndarray) -> None:
         """Render the field of `update` (a step of the history, or a state file such as a running
         refinement's live one) from `camera` (world frame) when the worker is free; the newest request

@@ -10,11 +10,14 @@ Steps (one object each):
     {"orbit": [dx, dy], "frames": 30}                 orbit the viewport every frame (frame-time figures)
     {"zoom": -6}                                      wheel steps on the viewport (negative: out)
     {"report_widgets": true}                          write where the named buttons are (for xdotool clicks)
+    {"hover": "run_update", "frames": 8}              move the mouse pointer onto a named widget (its tooltip shows)
     {"wait_updates": 3, "timeout": 300}               until the capture has this many updates (after a real click)
     {"wait_file": "path", "timeout": 120}             until that file exists (e.g. a refinement's live state)
+    {"wait_field": true, "timeout": 180}              until the field channel's picture is rendered and shown
     {"close_window": true}                            what the window's close button does (asks if work runs)
     {"quit": true}
-Results (screenshots, frame times, timings, errors) go to <out>/script_result.json.
+Results (screenshots, frame times, timings, errors, messages, what the viewport shows) go to
+<out>/script_result.json.
 """
 
 from __future__ import annotations
@@ -49,6 +52,9 @@ class ScriptRunner:
     def _save(self) -> None:
         self.result["messages"] = [{"level": m.level, "text": m.text} for m in self.app.state.messages]
         self.result["first_frame_seconds"] = self.app.first_frame_seconds
+        viewport = self.app.viewport
+        self.result["viewport"] = {"channel": self.app.state.choices.view.channel, "environment_listed": self.app.state.choices.view.environment,
+                                   "environment_lit": None if viewport is None else viewport.environment_key}
         (self.out / "script_result.json").write_text(json.dumps(self.result, indent=1))
 
     def step(self) -> None:
@@ -91,6 +97,16 @@ class ScriptRunner:
                 self.result["errors"].append(f"step {self.index}: {step['wait_file']} did not appear")
             self.waiting_since = None
             self.frames_left = 2
+        elif "wait_field" in step:
+            self.waiting_since = self.waiting_since or time.monotonic()
+            preview = self.app.field_preview
+            shown = preview.image is not None and not preview.busy() and self.app.viewport is not None and not self.app.viewport.dirty
+            if not shown and time.monotonic() - self.waiting_since < float(step.get("timeout", 180)):
+                return
+            if not shown:
+                self.result["errors"].append(f"step {self.index}: the field was not rendered in time ({preview.error or 'no error'})")
+            self.waiting_since = None
+            self.frames_left = 3  # the frames that put the picture on screen
         elif "close_window" in step:
             import glfw
 
@@ -107,6 +123,21 @@ class ScriptRunner:
             self._last_frame = None
             self.result["frame_seconds"] = []
             self.frames_left = int(step.get("frames", 30))
+        elif "hover" in step:
+            import glfw
+
+            rect = self.app.widget_rects.get(step["hover"])
+            if rect is None:
+                self.result["errors"].append(f"step {self.index}: no widget named {step['hover']!r} has been drawn")
+            else:
+                from imgui_bundle import imgui
+
+                # Warp the real pointer there, and tell imgui (GLFW does not report its own warps as moves).
+                # Near its left end: an item in a table column can be wider than the part of it that shows.
+                x, y = rect[0] + min((rect[2] - rect[0]) / 2, 24.0), (rect[1] + rect[3]) / 2
+                glfw.set_cursor_pos(glfw.get_current_context(), x, y)
+                imgui.get_io().add_mouse_pos_event(x, y)
+            self.frames_left = int(step.get("frames", 8))
         elif "zoom" in step:
             self.app.viewport.orbit.zoom(float(step["zoom"]))
             self.app.viewport.dirty = True

@@ -68,6 +68,48 @@ class LirmApp:
         self.started = time.perf_counter()
         self.first_frame_seconds: float | None = None
         self.widget_rects: dict[str, list[float]] = {}  # named buttons' screen rectangles (scripted clicks)
+        self._panel_errors: set[tuple[str, str]] = set()  # failures already reported
+        self._good_frames = 0  # frames drawn since a capture was opened
+
+    def guarded(self, panel):
+        """The panel's draw function, made so that a failure in it is reported in Messages (once) instead of
+        closing the window. A failure while the choices restored from the capture are in force drops them
+        (they are what the window could not show): reopening a capture must never take the window down."""
+        from imgui_bundle import imgui
+
+        def draw() -> None:
+            saved = imgui.internal.ErrorRecoveryState()
+            imgui.internal.error_recovery_store_state(saved)
+            try:
+                panel.draw()
+            except Exception as err:
+                io = imgui.get_io()
+                names = ("config_error_recovery_enable_assert", "config_error_recovery_enable_debug_log",
+                         "config_error_recovery_enable_tooltip")
+                before = [getattr(io, n) for n in names]
+                for n in names:
+                    setattr(io, n, False)
+                try:  # close what the panel left open (tables, disabled blocks...), quietly: it is reported below
+                    imgui.internal.error_recovery_try_to_recover_window_state(saved)
+                finally:
+                    for n, value in zip(names, before):
+                        setattr(io, n, value)
+                self._panel_failed(panel.title, err)
+        return draw
+
+    def _panel_failed(self, title: str, err: Exception) -> None:
+        what = f"{type(err).__name__}: {err}"
+        if self.state.choices_restored:
+            log.exception("the %s panel failed with the restored state", title)
+            try:
+                self.actions.drop_restored_choices(f"the {title} panel failed: {what}")
+                return
+            except Exception:  # not the saved state's doing after all: reported as any other failure
+                log.exception("dropping the restored state did not help")
+        if (title, what) not in self._panel_errors:
+            self._panel_errors.add((title, what))
+            log.exception("the %s panel failed", title)
+            self.state.say(f"the {title} panel failed: {what} (the window goes on; the log has the details)", "error")
 
     def note_widget(self, name: str) -> None:
         """Remember where the last drawn item is, in window pixels: [x0, y0, x1, y1]."""
@@ -109,6 +151,9 @@ class LirmApp:
         if self.first_frame_seconds is None:
             self.first_frame_seconds = time.perf_counter() - self.started
             log.info("first frame after %.2f s", self.first_frame_seconds)
+        self._good_frames += 1
+        if self._good_frames > 10:
+            self.state.choices_restored = False  # the restored choices are shown: from now on they are the user's
         if self.script is not None:
             self.script.after_frame()
 
@@ -124,6 +169,7 @@ class LirmApp:
         return True
 
     def before_exit(self) -> None:
+        self.field_preview.close()  # a field render still running would abort the interpreter's exit
         left = self.jobs.shutdown()
         for job in left:
             log.warning("%s goes on in the background (process %d); its file arrives when it is done", job.title, job.process.pid)
@@ -157,12 +203,13 @@ class LirmApp:
         if self.viewport is None:
             return
         if event == "capture":
+            self._good_frames = 0
             self._load_capture_geometry()
         if event in ("asset", "capture", "guidance"):
             self._load_asset()
         if event == "guidance":
             self._load_suggested_cameras()
-        if event == "environment":
+        if event in ("environment", "capture"):  # a reopened capture lights the viewport as it was left
             self._apply_environment()
         self.viewport.dirty = True
 
@@ -209,6 +256,8 @@ class LirmApp:
     def _apply_environment(self) -> None:
         from lirm.engine.assets.environment_files import resolve_environment
 
+        from .app_state import BUILTIN_ENVIRONMENTS
+
         view = self.state.choices.view
         if view.environment == self.viewport.environment_key:
             return
@@ -218,10 +267,12 @@ class LirmApp:
             self.state.say(f"cannot load the environment {view.environment}: {err}; back to the studio", "error")
             view.environment = "studio"
             environment = resolve_environment("studio", width=self.config.environment_width)
+        if view.environment not in BUILTIN_ENVIRONMENTS and view.environment not in self.user_environments:
+            self.user_environments.append(view.environment)  # an HDRI chosen in an earlier session: listed again
         self.viewport.set_environment(environment, view.environment)
 
     def add_environment(self, path: str) -> None:
-        p = Path(path).expanduser()
+        p = Path(path).expanduser().resolve()
         if not p.is_file() or p.suffix.lower() not in (".hdr", ".exr"):
             self.state.say(f"{path}: not an .hdr or .exr file", "error")
             return
@@ -324,7 +375,7 @@ def runner_params(app: LirmApp):
         w = hello_imgui.DockableWindow()
         w.label = panel.title
         w.dock_space_name = places[panel.title]
-        w.gui_function = panel.draw
+        w.gui_function = app.guarded(panel)
         windows.append(w)
     params.docking_params.dockable_windows = windows
     params.callbacks.post_init = app.post_init

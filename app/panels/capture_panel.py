@@ -39,7 +39,7 @@ class CapturePanel:
             return
         imgui.text_wrapped(str(state.capture_dir))
         posed = sum(f.posed for f in state.frames)
-        imgui.text(f"{len(state.frames)} photos, {posed} posed; next update: {', '.join(actions.next_views()) or 'none left'}")
+        imgui.text_wrapped(f"{len(state.frames)} photos, {posed} posed; next update: {', '.join(actions.next_views()) or 'none left'}")
         if imgui.small_button("Clear picks"):
             actions.select_views([])
         imgui.same_line()
@@ -48,8 +48,11 @@ class CapturePanel:
             actions.select_views([f.frame_id for f in state.frames if f.prepared and f.frame_id not in used])
         flags = imgui.TableFlags_.borders_inner_h | imgui.TableFlags_.scroll_y | imgui.TableFlags_.row_bg
         if imgui.begin_table("views", 6, flags, imgui.ImVec2(0, 0)):
-            for name in ("use", "", "view", "pose", "mask", "update"):
-                imgui.table_setup_column(name)
+            # The name takes the room left; the other columns fit their content (names are cut at the
+            # panel's edge, their tooltip has them whole).
+            fixed, stretch = imgui.TableColumnFlags_.width_fixed, imgui.TableColumnFlags_.width_stretch
+            for name, flags in (("use", fixed), ("", fixed), ("view", stretch), ("pose", fixed), ("mask", fixed), ("update", fixed)):
+                imgui.table_setup_column(name, flags)
             imgui.table_headers_row()
             for f in state.frames:
                 imgui.table_next_row()
@@ -65,6 +68,11 @@ class CapturePanel:
                 imgui.table_next_column()
                 if imgui.selectable(f"{f.name}##row_{f.frame_id}", self.inspected == f.frame_id)[0]:
                     self.inspected, self.box = f.frame_id, None
+                app.note_widget(f"view_{f.frame_id}")
+                if imgui.is_item_hovered(imgui.HoveredFlags_.for_tooltip):
+                    used = "not used yet" if f.update is None else f"used by update {f.update}"
+                    imgui.set_tooltip(f"{f.name}\nview {f.frame_id}; pose: {'posed' if f.posed else f.pose_status}; "
+                                      f"mask: {f.mask_status}; {used}\n(click to see its mask and redo it with a box)")
                 imgui.table_next_column()
                 coloured("posed" if f.posed else f.pose_status, "ok" if f.posed else "warning")
                 imgui.table_next_column()

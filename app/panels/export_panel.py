@@ -12,6 +12,7 @@ class ExportPanel:
 
     def __init__(self, app):
         self.app = app
+        self._typing: str | None = None  # the path box's text while it is being edited
 
     def draw(self) -> None:
         app, state, actions = self.app, self.app.state, self.app.actions
@@ -19,9 +20,16 @@ class ExportPanel:
         if state.capture_dir is None:
             imgui.text("Open a capture to export it.")
             return
-        default = str(state.capture_dir / "export" / "asset.glb")
+        default = str(actions.default_export_path())
         imgui.set_next_item_width(-1)
-        _, settings.path = imgui.input_text("##export_path", settings.path or default)
+        changed, typed = imgui.input_text("##export_path", self._typing if self._typing is not None else settings.path or default)
+        if changed:  # the default is not written down: a copied capture exports into itself
+            self._typing = typed
+            settings.path = "" if typed.strip() in ("", default) else typed
+        if not imgui.is_item_active():
+            self._typing = None  # an emptied box shows the default again once left
+        if imgui.is_item_hovered(imgui.HoveredFlags_.for_tooltip):
+            imgui.set_tooltip(f"{state.capture_path(settings.path or default)}\n(a relative path is inside the capture)")
         _, settings.faces = imgui.input_int("faces", settings.faces, 1000)
         _, settings.texture = imgui.input_int("texture side", settings.texture, 256)
         _, settings.grid = imgui.input_int("grid", settings.grid, 32)

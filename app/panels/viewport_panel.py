@@ -8,6 +8,9 @@ from imgui_bundle import imgui
 from lirm.app.viewport import frustum_lines
 from lirm.renderer.pbr_renderer import DISPLAY_CHANNELS
 
+from .common import COLOURS
+
+BACKDROP = 0.18  # the viewport's empty grey (viewport.py clears to it)
 INPUT_COLOUR = imgui.IM_COL32(120, 200, 255, 200)
 SUGGESTED_COLOUR = imgui.IM_COL32(120, 255, 120, 230)
 
@@ -34,15 +37,18 @@ class ViewportPanel:
         changed, show = imgui.checkbox("cameras", view.show_cameras)
         if changed:
             app.actions.set_show_cameras(show)
-        imgui.same_line()
-        if viewport.frame_times:
+        if viewport.frame_times:  # (none yet when a reopened capture starts on the field channel)
+            imgui.same_line()
             imgui.text(f"{1000 * viewport.last_render_seconds:.0f} ms")
         size = imgui.get_content_region_avail()
         width, height = int(max(size.x, 16)), int(max(size.y, 16))
+        notes: list[tuple[str, str]] = []  # (text, level) written over the image's top-left corner
         if view.channel == "field":
-            self._field(width, height)
+            notes += self._field(width, height)
         else:
             viewport.render(width, height, view.channel, view.rotation_deg, view.exposure_ev, view.background)
+        if viewport.texture is None:  # nothing drawn yet (a reopened field channel's first picture is on its way)
+            viewport.show_image(np.full((8, 8, 3), BACKDROP, np.float32), width, height)
         origin = imgui.get_cursor_screen_pos()
         imgui.image(imgui.ImTextureRef(viewport.texture.glo), imgui.ImVec2(width, height), imgui.ImVec2(0, 1), imgui.ImVec2(1, 0))
         app.note_widget("viewport")
@@ -50,19 +56,35 @@ class ViewportPanel:
         if view.show_cameras and app.world_from_capture is not None:
             self._frusta(origin, width, height)
         if state.capture_dir is not None and state.preview_asset is None and not state.updates:
-            imgui.set_cursor_screen_pos(imgui.ImVec2(origin.x + 12, origin.y + 12))
-            imgui.text("No reconstruction yet: pick views in Capture and run an update.")
+            notes.append(("No reconstruction yet: pick views in Capture and run an update.", "info"))
+        self._overlay(origin, width, notes)
 
-    def _field(self, width: int, height: int) -> None:
-        """The raw radiance field from this viewpoint, rendered in the background (see field_preview.py)."""
+    def _overlay(self, origin, width: int, notes: list[tuple[str, str]]) -> None:
+        """Status lines over the image (on a dark band each, wrapped to the image): the image keeps its place."""
+        draw = imgui.get_window_draw_list()
+        font, font_size = imgui.get_font(), imgui.get_font_size()
+        wrap = max(width - 24.0, 40.0)
+        y = origin.y + 8
+        for text, level in notes:
+            size = imgui.calc_text_size(text, wrap_width=wrap)
+            draw.add_rect_filled(imgui.ImVec2(origin.x + 6, y - 3), imgui.ImVec2(origin.x + 14 + size.x, y + size.y + 3),
+                                 imgui.IM_COL32(0, 0, 0, 170), 4.0)
+            draw.add_text(font, font_size, imgui.ImVec2(origin.x + 10, y), imgui.get_color_u32(COLOURS.get(level, COLOURS["info"])),
+                          text, wrap)
+            y += size.y + 10
+
+    def _field(self, width: int, height: int) -> list[tuple[str, str]]:
+        """The raw radiance field from this viewpoint, rendered in the background (see field_preview.py);
+        what to say over it."""
         app, viewport, preview = self.app, self.app.viewport, self.app.field_preview
         update = app.state.viewing_update
         live = app.actions.live_refine_path()
         if live is not None:  # a refinement is running: its field as it fits, re-read whenever the file changes
             update = (live, live.stat().st_mtime_ns)
         if (live is None and update < 1) or app.world_from_capture is None:
-            viewport.show_image(np.full((8, 8, 3), 0.18, np.float32), width, height)
-            return
+            viewport.show_image(np.full((8, 8, 3), BACKDROP, np.float32), width, height)
+            self._field_shown = None
+            return [("The field appears after the first update.", "info")] if app.state.capture_dir is not None else []
         if viewport.dirty or self._field_size != (width, height, update):
             preview.request(app.state.capture_dir, live if live is not None else update, app.actions.checkpoint,
                             viewport.orbit.camera(width, height), app.world_from_capture)
@@ -71,13 +93,14 @@ class ViewportPanel:
         if preview.image is not None and preview.image_key != self._field_shown:
             viewport.show_image(preview.image, width, height)
             self._field_shown = preview.image_key
+        notes = []
         if live is not None:
-            imgui.text("refining: the field as it fits, refreshed every few seconds")
+            notes.append(("refining: the field as it fits, refreshed every few seconds", "info"))
         elif preview.busy():
-            imgui.text("rendering the field...")
-            imgui.same_line()
+            notes.append(("rendering the field...", "info"))
         if preview.error:
-            imgui.text(preview.error)
+            notes.append((preview.error, "error"))
+        return notes
 
     def _mouse(self, width: int, height: int) -> None:
         if not imgui.is_item_hovered():
