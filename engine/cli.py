@@ -11,21 +11,127 @@ from pathlib import Path
 from lirm.renderer.context import GLContextError
 
 from . import progress_events
-from .errors import LirmUserError
+from .errors import LirmResourceError, LirmUsageError, LirmUserError
+
+# Exit codes (README "Exit codes"): what went wrong, for scripts and for the app's background jobs.
+EXIT_OK = 0  # done
+EXIT_NOTHING_USABLE = 1  # the run finished but produced nothing usable (e.g. no photo could be posed)
+EXIT_USAGE = 2  # bad usage: an unknown or missing argument, an option value out of its range
+EXIT_INPUT = 3  # bad input: a file, folder, capture or checkpoint that cannot be used, or a missing prerequisite
+EXIT_RESOURCES = 4  # not enough memory or disk for what was asked
+EXIT_INTERNAL = 70  # an internal error: a bug (sysexits.h EX_SOFTWARE)
+EXIT_CANCELLED = 130  # cancelled with Ctrl-C (128 + SIGINT)
+
+# Accepted ranges of the options that size the work (checked before any work starts).
+CAPTURE_SIZE = (32, 2048)  # lirm capture --size
+MAX_SIDE = (64, 16384)  # lirm capture --max-side
+RENDER_SIZE = (8, 4096)  # reconstruct/refine --render-size
+GRID_RESOLUTION = (16, 1024)  # reconstruct/refine --grid-resolution
+EXPORT_GRID = (16, 1024)  # export --grid, bench export --grid
+TEXTURE = (64, 4096)  # export --texture
+VIEW_SIZE = (16, 1024)  # eval and bench --size (protocol views)
+MESH_RESOLUTION = (16, 1024)  # eval and bench --mesh-resolution
+
+# The options to lower when a command runs out of memory all the same.
+MEMORY_OPTIONS = {
+    "capture": ("--max-side", "--size"), "reconstruct": ("--render-size", "--grid-resolution", "--views-per-update"),
+    "refine": ("--render-size", "--grid-resolution", "--preset"), "export": ("--grid", "--texture"),
+    "render": ("--size", "--supersample"), "eval": ("--size", "--objects", "--mesh-resolution"),
+    "train": ("--preset", "--workers"), "bench model": ("--preset", "--views-per-update"), "bench capacity": ("--preset",),
+    "bench export": ("--grid", "--texture"), "bench trajectory": ("--size", "--mesh-resolution"),
+    "bench refine": ("--size", "--objects"), "bench update-order": ("--size",), "bench synth": ("--size", "--views"),
+    "bench render": ("--sizes",), "bench capture": ("--max-side", "--counts"),
+}
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(argv)  # bad usage: argparse prints it and exits with EXIT_USAGE (2)
     _configure_logging(args.verbose)
     try:
         return args.run(args)
+    except LirmUsageError as err:
+        print(f"error: {err} (see `lirm {args.command} --help`)", file=sys.stderr)
+        return EXIT_USAGE
+    except LirmResourceError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return EXIT_RESOURCES
     except (LirmUserError, GLContextError) as err:
         print(f"error: {err}", file=sys.stderr)
-        return 2
+        return EXIT_INPUT
     except KeyboardInterrupt:
         print("cancelled", file=sys.stderr)
-        return 130
+        return EXIT_CANCELLED
+    except Exception as err:  # noqa: BLE001 - the last line of defence: a sentence, never a bare traceback
+        if _out_of_memory(err):
+            print(f"error: {_out_of_memory_sentence(args, err)}", file=sys.stderr)
+            return EXIT_RESOURCES
+        import traceback
+
+        crash = _write_crash_report(sys.argv[1:] if argv is None else argv)
+        if args.verbose or crash is None:
+            traceback.print_exc()
+        where = f"the traceback written to {crash}" if crash else "the traceback above"
+        print(f"error: internal error: {type(err).__name__}: {err}; this is a bug in LIRM Studio: please report it "
+              f"with {where}", file=sys.stderr)
+        return EXIT_INTERNAL
+
+
+def _out_of_memory(err: BaseException) -> bool:
+    """A MemoryError, or torch's (CPU or CUDA) allocation failure, which is a RuntimeError."""
+    if isinstance(err, MemoryError):
+        return True
+    text = str(err).lower()
+    return isinstance(err, RuntimeError) and ("out of memory" in text or "can't allocate memory" in text)
+
+
+def _out_of_memory_sentence(args: argparse.Namespace, err: BaseException) -> str:
+    from .resources import available_memory_bytes, format_bytes
+
+    options = [o for o in MEMORY_OPTIONS.get(args.command, ()) if hasattr(args, o.lstrip("-").replace("-", "_"))]
+    now = [f"{o} (now {getattr(args, o.lstrip('-').replace('-', '_'))})" for o in options]
+    free = available_memory_bytes()
+    lower = (f"lower {', '.join(now[:-1])} or {now[-1]}" if len(now) > 1 else f"lower {now[0]}") if now else \
+        "run it on a machine with more memory"
+    return (f"not enough memory: `lirm {args.command}` ran out of memory ({type(err).__name__})"
+            + (f" with {format_bytes(free)} free now" if free is not None else "")
+            + f"; {lower}, or close other programs, and run it again")
+
+
+def _write_crash_report(argv: list[str]) -> Path | None:
+    """The traceback of the exception being handled, in CACHE/lirm/crash-<time>.txt (CACHE: $XDG_CACHE_HOME,
+    else ~/.cache; the system's temporary folder when neither can be written); None when nothing can."""
+    import os
+    import platform
+    import tempfile
+    import time
+    import traceback
+
+    try:
+        from importlib.metadata import version
+
+        lirm_version = version("lirm")
+    except Exception:  # noqa: BLE001 - not installed as a distribution
+        lirm_version = "unknown"
+    text = (f"lirm {lirm_version}, Python {platform.python_version()} on {platform.platform()}\n"
+            f"command: lirm {' '.join(argv)}\ntime: {time.strftime('%Y-%m-%d %H:%M:%S')}\n\n{traceback.format_exc()}")
+    cache = os.environ.get("XDG_CACHE_HOME")
+    cache = Path(cache) if cache and Path(cache).is_absolute() else Path.home() / ".cache"
+    stamp = f"crash-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
+    for folder in (cache / "lirm", Path(tempfile.gettempdir()) / "lirm"):
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            for n in range(100):  # never overwrite an earlier report
+                path = folder / (stamp + (f"-{n}" if n else "") + ".txt")
+                try:
+                    with open(path, "x", encoding="utf-8") as f:
+                        f.write(text)
+                    return path
+                except FileExistsError:
+                    continue
+        except OSError:
+            continue
+    return None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -290,6 +396,10 @@ def build_parser() -> argparse.ArgumentParser:
     bc.add_argument("--masks", default="auto", help="mask mode, as for lirm capture")
     bc.add_argument("--json", type=Path, help="also write the results as JSON here")
     bc.set_defaults(run=_run_bench_capture)
+    for name, command in sub.choices.items():  # for messages: `lirm COMMAND --help`
+        command.set_defaults(command=name)
+    for name, command in bench_sub.choices.items():
+        command.set_defaults(command=f"bench {name}")
     return parser
 
 
@@ -315,7 +425,56 @@ def _require_at_least_one(args: argparse.Namespace, *names: str) -> None:
     for name in names:
         value = getattr(args, name)
         if value is not None and value < 1:
-            raise LirmUserError(f"--{name.replace('_', '-')} must be at least 1")
+            raise LirmUsageError(f"--{name.replace('_', '-')} must be at least 1, got {value}")
+
+
+def _require_range(args: argparse.Namespace, name: str, accepted: tuple[int, int], unit: str = "") -> None:
+    """Refuse an option value outside `accepted` (inclusive; None means "not given" and passes)."""
+    value = getattr(args, name)
+    low, high = accepted
+    if value is not None and not low <= value <= high:
+        raise LirmUsageError(f"--{name.replace('_', '-')} must be between {low} and {high}{unit}, got {value}")
+
+
+def _check_memory(args: argparse.Namespace, needs: list[tuple[str, tuple[int, int], object]], together: bool = True) -> None:
+    """Refuse (LirmResourceError) settings whose memory does not fit in the memory available now;
+    `needs`: (option, accepted range, bytes as a function of its value) per memory-hungry option."""
+    from .resources import MemoryNeed, check_memory
+
+    check_memory(args.command, [MemoryNeed(option, getattr(args, option.lstrip("-").replace("-", "_")), bytes_for, accepted[0])
+                                for option, accepted, bytes_for in needs], together=together)
+
+
+def _check_render_options(args: argparse.Namespace) -> None:
+    _require_range(args, "render_size", RENDER_SIZE, " pixels")
+    _require_range(args, "grid_resolution", GRID_RESOLUTION, " voxels per side")
+
+
+def _check_render_memory(args: argparse.Namespace) -> None:
+    """reconstruct/refine: the occupancy grid and one picture's buffers are held together."""
+    from .resources import occupancy_grid_bytes, render_bytes
+
+    _check_memory(args, [("--render-size", RENDER_SIZE, render_bytes), ("--grid-resolution", GRID_RESOLUTION, occupancy_grid_bytes)])
+
+
+def _check_export_options(args: argparse.Namespace) -> None:
+    _require_range(args, "grid", EXPORT_GRID, " samples per side")
+    _require_range(args, "texture", TEXTURE, " pixels")
+    if args.faces < 100:
+        raise LirmUsageError(f"--faces must be at least 100, got {args.faces}")
+
+
+def _check_export_memory(args: argparse.Namespace) -> None:
+    """export: the marching-cubes grid, then (after it is freed) the texture bake."""
+    from .resources import bake_bytes, mesh_grid_bytes
+
+    _check_memory(args, [("--grid", EXPORT_GRID, mesh_grid_bytes), ("--texture", TEXTURE, bake_bytes)], together=False)
+
+
+def _check_output(path: Path, what: str, **kwargs) -> None:
+    from .io.output_paths import check_writable_output
+
+    check_writable_output(path, what, **kwargs)
 
 
 def _require_capture(folder: Path) -> None:
@@ -364,7 +523,7 @@ def _run_render(args: argparse.Namespace) -> int:
         print("built-in environments: " + ", ".join(PROCEDURAL_ENVIRONMENTS))
         return 0
     if args.asset is None or args.out is None:
-        raise LirmUserError("lirm render needs an ASSET and -o OUT_DIR (lirm render --list shows the built-in assets)")
+        raise LirmUsageError("lirm render needs an ASSET and -o OUT_DIR (lirm render --list shows the built-in assets)")
     try:
         config = OrbitRenderConfig(
             views=args.views, width=args.size[0], height=args.size[1], elevation_deg=args.elevation, fov_deg=args.fov,
@@ -372,7 +531,8 @@ def _run_render(args: argparse.Namespace) -> int:
             environment_rotation_deg=args.env_rotation, normalize=not args.keep_scale,
         )
     except ValueError as err:
-        raise LirmUserError(str(err)) from None
+        raise LirmUsageError(str(err)) from None
+    _check_output(args.out, "the output folder (-o)", folder=True)
     model = resolve_asset(args.asset)
     environment = resolve_environment(args.env)
     from lirm.renderer.ibl import IBL_PRESETS
@@ -396,7 +556,17 @@ def _run_capture(args: argparse.Namespace) -> int:
     from .capture.capture_lock import capture_lock
     from .capture.pipeline import CaptureConfig, add_to_capture, run_capture
     from .capture.report import format_capture_report
+    from .resources import crop_bytes
 
+    _require_range(args, "size", CAPTURE_SIZE, " pixels")
+    _require_range(args, "max_side", MAX_SIDE, " pixels")
+    if args.resume or args.add:  # an existing capture (not one? _require_capture says so below)
+        existing = Path(args.inputs) if args.resume else args.capture
+        if existing is not None and existing.is_dir():
+            _check_output(existing, "the capture folder", folder=True)
+    elif not (args.fix_mask or args.check or args.undo_fix_mask) and args.out is not None:
+        _check_output(args.out, "the capture folder (-o)", folder=True)
+    _check_memory(args, [("--size", CAPTURE_SIZE, crop_bytes)])
     config = CaptureConfig(masks=args.masks, poses=args.poses)
     config = replace(config, ingest=replace(config.ingest, max_side=args.max_side, copy_originals=not args.reference_originals),
                      crop=replace(config.crop, size=args.size))
@@ -405,7 +575,7 @@ def _run_capture(args: argparse.Namespace) -> int:
         try:
             source = int(args.inputs.split(":", 1)[1])
         except ValueError:
-            raise LirmUserError(f"{args.inputs}: write a camera as camera:0, camera:1, ...") from None
+            raise LirmUsageError(f"{args.inputs}: write a camera as camera:0, camera:1, ...") from None
     bars: dict = {}
 
     def progress(stage: str, done: int, total: int) -> None:
@@ -427,7 +597,7 @@ def _run_capture(args: argparse.Namespace) -> int:
         from .capture.pipeline import fix_mask
 
         if args.capture is None:
-            raise LirmUserError("lirm capture --fix-mask FRAME_ID MASK.png CAPTURE: name the capture folder")
+            raise LirmUsageError("lirm capture --fix-mask FRAME_ID MASK.png CAPTURE: name the capture folder")
         mask = cv2.imread(args.inputs, cv2.IMREAD_GRAYSCALE)
         if mask is None:
             raise LirmUserError(f"{args.inputs}: cannot read the corrected mask; save it as a PNG, 255 = object")
@@ -465,13 +635,13 @@ def _run_capture(args: argparse.Namespace) -> int:
                 summary = resume_capture(Path(args.inputs), config, progress=progress)
         elif args.add:
             if args.capture is None:
-                raise LirmUserError("lirm capture --add PHOTOS CAPTURE: name the capture folder to extend")
+                raise LirmUsageError("lirm capture --add PHOTOS CAPTURE: name the capture folder to extend")
             _require_capture(args.capture)
             with capture_lock(args.capture, "lirm capture --add"):
                 summary = add_to_capture(args.capture, source, config, progress=progress)
         else:
             if args.out is None:
-                raise LirmUserError("lirm capture PHOTOS -o CAPTURE: name the capture folder to create with -o")
+                raise LirmUsageError("lirm capture PHOTOS -o CAPTURE: name the capture folder to create with -o")
             summary = run_capture(source, args.out, config, progress=progress)
     finally:
         for bar in bars.values():
@@ -488,8 +658,13 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
     from .model.pretrained import load_model
     from .reconstruction.session import ReconstructConfig, run_reconstruction
 
+    _require_at_least_one(args, "views_per_update", "novel_views", "updates")
+    _check_render_options(args)
+    if args.after is not None and not args.frames:
+        raise LirmUsageError("--after goes with --frames (the views of the one update to run)")
     _require_capture(args.capture)
-    _require_at_least_one(args, "views_per_update", "novel_views", "render_size", "grid_resolution", "updates")
+    _check_output(args.capture, "the capture folder", folder=True)
+    _check_render_memory(args)
     source = load_model(args.checkpoint, args.preset)
     if source.warning:
         print("\n" + "!" * 100 + f"\n{source.warning}\n" + "!" * 100 + "\n", file=sys.stderr)
@@ -513,8 +688,6 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
             result = run_next_update(args.capture, source, frames, args.after, config)
             progress("update", 1, 1)
         else:
-            if args.after is not None:
-                raise LirmUserError("--after goes with --frames (the views of the one update to run)")
             result = run_reconstruction(args.capture, source, config, progress=progress)
     finally:
         bar.close()
@@ -542,14 +715,17 @@ def _run_refine(args: argparse.Namespace) -> int:
     from .reconstruction.session import ReconstructConfig
     from .refine.config import refine_preset
 
-    _require_capture(args.capture)
-    _require_at_least_one(args, "novel_views", "render_size", "holdout_every", "grid_resolution")
+    _require_at_least_one(args, "novel_views", "holdout_every", "iterations")
+    _check_render_options(args)
     if not args.live_every > 0:
-        raise LirmUserError(f"--live-every must be positive, got {args.live_every}")
+        raise LirmUsageError(f"--live-every must be positive, got {args.live_every}")
     if args.minutes is not None and not args.minutes > 0:
-        raise LirmUserError(f"--minutes must be positive, got {args.minutes}")
-    if args.iterations is not None and args.iterations < 1:
-        raise LirmUserError(f"--iterations must be at least 1, got {args.iterations}")
+        raise LirmUsageError(f"--minutes must be positive, got {args.minutes}")
+    _require_capture(args.capture)
+    _check_output(args.capture, "the capture folder", folder=True)
+    if args.live is not None:
+        _check_output(args.live, "the live field (--live)", example="live.safetensors")
+    _check_render_memory(args)
     device = ("cuda" if torch.cuda.is_available() else "cpu") if args.device == "auto" else args.device
     if device.startswith("cuda") and not torch.cuda.is_available():
         raise LirmUserError("--device cuda: no CUDA device is available here; use --device cpu")
@@ -605,10 +781,12 @@ def _run_export(args: argparse.Namespace) -> int:
     from .export.export_asset import ExportConfig
     from .export.field_mesh import MeshExtractionConfig
 
-    if args.faces < 100:
-        raise LirmUserError("--faces must be at least 100")
-    if args.grid < 16:
-        raise LirmUserError("--grid must be at least 16")
+    _check_export_options(args)
+    _require_capture(args.capture)
+    _check_output(args.out, "the asset (-o)", make_parents=False, example=f"{args.capture.name or 'asset'}.glb")
+    if args.obj:
+        _check_output(args.out.with_suffix(".obj"), "the OBJ copy (--obj)", make_parents=False)
+    _check_export_memory(args)
     config = ExportConfig(mesh=replace(MeshExtractionConfig(), resolution=args.grid, face_budget=args.faces),
                           texture_size=args.texture, normal_map=not args.no_normal_map, obj=args.obj)
     result, source = export_capture(args.capture, args.out, config, args.checkpoint,
@@ -624,9 +802,11 @@ def _run_suggest(args: argparse.Namespace) -> int:
     from .guidance.suggest import suggest_for_capture, write_guidance, write_heat_map
     from lirm.renderer.context import create_headless_context
 
-    if args.k < 1:
-        raise LirmUserError("--k must be at least 1")
+    _require_at_least_one(args, "k")
     _require_capture(args.capture)
+    if args.heat_map is not None:
+        _check_output(args.heat_map, "the heat map (--heat-map)", example="heat_map.png")
+    _check_output(args.capture / "guidance", "the capture's guidance folder", folder=True)
     ctx = create_headless_context()
     try:
         result = suggest_for_capture(ctx, args.capture, args.k, args.checkpoint)
@@ -667,12 +847,15 @@ def _run_bench_trajectory(args: argparse.Namespace) -> int:
     from lirm.renderer.context import create_headless_context
     from lirm.renderer.pbr_renderer import PBRRenderer
 
-    _require_at_least_one(args, "objects", "size", "output_views", "mesh_resolution", "random_draws", "input_size")
+    _require_at_least_one(args, "objects", "output_views", "random_draws")
+    _require_range(args, "size", VIEW_SIZE, " pixels")
+    _require_range(args, "input_size", VIEW_SIZE, " pixels")
+    _require_range(args, "mesh_resolution", MESH_RESOLUTION, " samples per side")
     if args.reconstructor == "carved-hull":
         from .evaluation.carved_hull import CarvedHull
 
         if args.checkpoint:
-            raise LirmUserError("the carved hull has no weights: drop the checkpoint, or use --reconstructor lirm")
+            raise LirmUsageError("the carved hull has no weights: drop the checkpoint, or use --reconstructor lirm")
         reconstructor, description = CarvedHull(args.input_size), f"the carved visual hull ({args.input_size} px inputs)"
     else:
         source = _model_with_warning(args.checkpoint)
@@ -755,7 +938,7 @@ def _run_bench_suggest(args: argparse.Namespace) -> int:
 
     _require_capture(args.capture)
     if args.repeats < 1 or args.k < 1:
-        raise LirmUserError("--repeats and --k must be at least 1")
+        raise LirmUsageError("--repeats and --k must be at least 1")
     start = time.perf_counter()
     ctx = create_headless_context()
     context_seconds = time.perf_counter() - start
@@ -798,7 +981,7 @@ def _scene_config(args: argparse.Namespace, base, rank0: bool):
             print(scan.report("glTF models"), file=sys.stderr)
         objects += tuple(str(p) for p in scan.usable)
     elif args.no_builtin_objects:
-        raise LirmUserError("--no-builtin-objects needs --models FOLDER: there would be nothing to train on")
+        raise LirmUsageError("--no-builtin-objects needs --models FOLDER: there would be nothing to train on")
     if args.environments:
         scan = scan_environment_folder(args.environments)
         if rank0:
@@ -856,7 +1039,9 @@ def _run_eval(args: argparse.Namespace) -> int:
     from .evaluation.report import comparison_table, markdown_table
     from .io.atomic_files import atomic_write, atomic_write_json
 
-    _require_at_least_one(args, "objects", "size", "updates", "mesh_resolution")
+    _require_at_least_one(args, "objects", "updates", "output_views")
+    _require_range(args, "size", VIEW_SIZE, " pixels")
+    _require_range(args, "mesh_resolution", MESH_RESOLUTION, " samples per side")
     source = _model_with_warning(args.checkpoint)
     model = source.model
     config = EvalConfig(updates=args.updates, output_views=args.output_views, mesh_resolution=args.mesh_resolution)
@@ -882,7 +1067,7 @@ def _run_eval(args: argparse.Namespace) -> int:
         from .refine.config import refine_preset
 
         if args.refine_minutes is not None and not args.refine_minutes > 0:
-            raise LirmUserError(f"--refine-minutes must be positive, got {args.refine_minutes}")
+            raise LirmUsageError(f"--refine-minutes must be positive, got {args.refine_minutes}")
         refine = refine_preset("default", **({"minutes": args.refine_minutes} if args.refine_minutes else {}))
         for name, init in (("refined from LIRM", "lirm"), ("refined from the hull", "hull")):
             bar = _progress_bar(len(objects), f"{name} ({refine.minutes:g} min each)")
@@ -923,9 +1108,10 @@ def _run_bench_refine(args: argparse.Namespace) -> int:
     from .io.atomic_files import atomic_write
     from .refine.config import refine_preset
 
-    _require_at_least_one(args, "objects", "size", "output_views")
+    _require_at_least_one(args, "objects", "output_views")
+    _require_range(args, "size", VIEW_SIZE, " pixels")
     if any(not m > 0 for m in args.minutes):
-        raise LirmUserError(f"--minutes must all be positive, got {args.minutes}")
+        raise LirmUsageError(f"--minutes must all be positive, got {args.minutes}")
     source = _model_with_warning(args.checkpoint)
     base = apply_options(refine_preset("default"), args.option)
     args.updates = 4
@@ -960,7 +1146,8 @@ def _run_bench_update_order(args: argparse.Namespace) -> int:
     from .evaluation.evaluate import EvalConfig
     from .io.atomic_files import atomic_write, atomic_write_json
 
-    _require_at_least_one(args, "objects", "size", "output_views")
+    _require_at_least_one(args, "objects", "output_views")
+    _require_range(args, "size", VIEW_SIZE, " pixels")
     source = _model_with_warning(args.checkpoint)
     args.set, args.updates = "synthetic", 3
     objects = _heldout_objects(args)
@@ -994,6 +1181,8 @@ def _heldout_objects(args: argparse.Namespace):
 
     if args.set not in ("synthetic", "gltf"):
         capture = Path(args.set)
+        if not capture.exists():
+            raise LirmUsageError(f"--set {args.set}: not 'synthetic', 'gltf' or a capture folder (no such folder)")
         if not (capture / "capture.json").exists():
             raise LirmUserError(f"--set {args.set}: not 'synthetic', 'gltf' or a capture folder (no capture.json there)")
         return capture_heldout(capture, sets=args.updates)
@@ -1068,7 +1257,7 @@ def _run_bench_model(args: argparse.Namespace) -> int:
     from .bench.model_bench import ModelBenchConfig, run_model_bench
 
     if args.updates < 1 or args.views_per_update < 1:
-        raise LirmUserError("--updates and --views-per-update must be at least 1")
+        raise LirmUsageError("--updates and --views-per-update must be at least 1")
     config = ModelBenchConfig(preset=args.preset, updates=args.updates, views_per_update=args.views_per_update, device=args.device,
                               baseline=not args.no_baseline, baseline_max_views=args.baseline_max_views, json_path=args.json)
     result = run_model_bench(config, progress=lambda message: print(message, file=sys.stderr))
@@ -1087,7 +1276,7 @@ def _run_bench_capacity(args: argparse.Namespace) -> int:
     from .train.overfit import OverfitConfig, comparison_sheet, render_training_views, run_overfit
 
     if args.steps < 1:
-        raise LirmUserError("--steps must be at least 1")
+        raise LirmUsageError("--steps must be at least 1")
     config = replace(OverfitConfig(), preset=args.preset, steps=args.steps, views=ObjectViewsConfig(object_name=args.object),
                      eval_every=max(args.steps // 6, 1))
 
@@ -1113,6 +1302,8 @@ def _run_bench_export(args: argparse.Namespace) -> int:
 
     from .bench.export_bench import ExportBenchConfig, RoundTripConfig, run_asset_round_trip, run_export_bench
 
+    _check_export_options(args)
+    _check_export_memory(args)
     if args.model:
         figures = run_asset_round_trip(RoundTripConfig(args.model, args.env, grid=args.grid, faces=args.faces,
                                                        texture=args.texture, sheet=args.sheet))
@@ -1131,8 +1322,8 @@ def _run_bench_synth(args: argparse.Namespace) -> int:
 
     from .bench.synth_bench import SynthBenchConfig, run_synth_bench
 
-    if min(args.scenes, args.views, args.size) < 1:
-        raise LirmUserError("--scenes, --views and --size must be at least 1")
+    _require_at_least_one(args, "scenes", "views")
+    _require_range(args, "size", (16, 2048), " pixels")
     base = SynthBenchConfig()
     config = replace(base, scenes=args.scenes, scene=replace(base.scene, views=args.views, size=args.size), sheet_path=args.sheet)
     result = run_synth_bench(config, progress=lambda message: print(message, file=sys.stderr))
@@ -1145,12 +1336,13 @@ def _run_bench_synth(args: argparse.Namespace) -> int:
 def _run_bench_capture(args: argparse.Namespace) -> int:
     from .bench.capture_bench import CaptureBenchConfig, run_capture_bench
 
+    _require_range(args, "max_side", MAX_SIDE, " pixels")
     if not args.photos.is_dir():
         raise LirmUserError(f"{args.photos}: not a folder of photos")
     try:
         counts = tuple(int(s) for s in args.counts.split(","))
     except ValueError:
-        raise LirmUserError(f"--counts must be comma-separated integers, got {args.counts!r}") from None
+        raise LirmUsageError(f"--counts must be comma-separated integers, got {args.counts!r}") from None
     config = CaptureBenchConfig(args.photos, counts, args.max_side, args.masks)
     result = run_capture_bench(config, progress=lambda message: print(message, file=sys.stderr))
     print(result.table())
@@ -1167,7 +1359,7 @@ def _run_bench_render(args: argparse.Namespace) -> int:
     try:
         sizes = tuple(int(s) for s in args.sizes.split(","))
     except ValueError:
-        raise LirmUserError(f"--sizes must be comma-separated integers, got {args.sizes!r}") from None
+        raise LirmUsageError(f"--sizes must be comma-separated integers, got {args.sizes!r}") from None
     config = RenderBenchConfig(model=args.model, environment=args.env, sizes=sizes, frames=args.frames, ibl_preset=args.ibl)
     result = run_render_bench(config, progress=lambda message: print(message, file=sys.stderr))
     print(result.table())

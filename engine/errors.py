@@ -1,8 +1,15 @@
-"""Errors a user can act on. The command line prints them as one message, never a traceback."""
+"""Errors a user can act on. The command line prints them as one message, never a traceback, and
+exits with a code that tells them apart (engine/cli.py, README "Exit codes"): LirmUsageError 2,
+LirmUserError 3, LirmResourceError 4."""
 
 
 class LirmUserError(Exception):
     """Bad input or a missing prerequisite: `str(err)` names the file and says what to do."""
+
+
+class LirmUsageError(LirmUserError):
+    """A command-line option out of its range or options that do not go together: `str(err)` names
+    the option, what it accepts and the value given."""
 
 
 class AssetLoadError(LirmUserError):

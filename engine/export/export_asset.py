@@ -49,20 +49,9 @@ class ExportResult:
 
 def _check_writable(path: Path) -> None:
     """Refuse an output we could not write before spending minutes on the export."""
-    import tempfile
+    from lirm.engine.io.output_paths import check_writable_output
 
-    folder = path.parent
-    if not folder.exists():
-        raise LirmUserError(f"cannot write {path}: the folder {folder} does not exist")
-    if not folder.is_dir():
-        raise LirmUserError(f"cannot write {path}: {folder} is a file, not a folder")
-    if path.is_dir():
-        raise LirmUserError(f"cannot write {path}: it is a folder; name a .glb file")
-    try:
-        with tempfile.NamedTemporaryFile(dir=folder, prefix=f".{path.name}.", suffix=".probe"):
-            pass
-    except OSError as err:
-        raise LirmUserError(f"cannot write {path} ({err.strerror}); choose a folder you can write to") from None
+    check_writable_output(path, "the asset", make_parents=False, example="asset.glb")
 
 
 def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig(), world_transform: np.ndarray | None = None,

@@ -112,6 +112,14 @@ def _check_path(path: str | Path) -> Path:
     if path.suffix.lower() in PICKLE_SUFFIXES:
         raise LirmUserError(f"checkpoint {path} is a pickle file; only .safetensors checkpoints are accepted "
                             f"(pickle files can run code when loaded)")
+    if path.is_dir():
+        found = sorted(path.glob("*.safetensors"))
+        if found:
+            best = next((p for p in found if p.name == "last.safetensors"), found[-1])
+            raise LirmUserError(f"checkpoint {path} is a folder; pass the .safetensors file inside it, e.g. "
+                                f"{best} (it holds {_few([p.name for p in found], 5)})")
+        raise LirmUserError(f"checkpoint {path} is a folder with no .safetensors file in it; pass the path of a "
+                            f".safetensors checkpoint file (a training run writes RUN/last.safetensors)")
     if not path.is_file():
         raise LirmUserError(f"checkpoint {path} does not exist; check the path or train/download one")
     return path

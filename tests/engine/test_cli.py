@@ -34,7 +34,7 @@ def test_help_lists_only_built_subcommands():
 def test_app_without_a_display_says_what_to_do():
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     done = subprocess.run([*LIRM, "app"], capture_output=True, text=True, env=env)
-    assert done.returncode == 2 and "no display" in done.stderr and "lirm demo" in done.stderr
+    assert done.returncode == 3 and "no display" in done.stderr and "lirm demo" in done.stderr
 
 
 def test_render_builtin_object_writes_every_channel_and_consistent_cameras(tmp_path, capsys):
@@ -81,9 +81,10 @@ def test_render_a_gltf_under_a_real_hdr(tmp_path, capsys, shared_data):
     assert len(list((tmp_path / "beauty").glob("*.png"))) == 2
 
 
-def _expect_user_error(capsys, *args: str, mentions: str) -> str:
-    code, _, err = run_cli(capsys, *args)
-    assert code == 2
+def _expect_user_error(capsys, *args: str, mentions: str, code: int = 3) -> str:
+    """Exit code 3 (bad input) unless told, e.g. 2 for an option out of range."""
+    got, _, err = run_cli(capsys, *args)
+    assert got == code
     assert "Traceback" not in err
     assert err.startswith("error: ")
     assert mentions in err
@@ -126,9 +127,9 @@ def test_bad_arguments(tmp_path, capsys):
         main(["render", "vase", "--size", "big", "-o", str(tmp_path)])
     assert exc.value.code == 2
     assert "size must look like 512x512" in capsys.readouterr().err
-    _expect_user_error(capsys, "render", "vase", "--views", "0", "-o", str(tmp_path), mentions="views")
+    _expect_user_error(capsys, "render", "vase", "--views", "0", "-o", str(tmp_path), mentions="views", code=2)
     _expect_user_error(capsys, "render", "vase", "--size", "4096x4096", "--supersample", "4", "-o", str(tmp_path),
-                       mentions="lower --size or --supersample")
+                       mentions="lower --size or --supersample", code=2)
 
 
 def test_bench_render_reports_positive_rates(tmp_path, capsys):

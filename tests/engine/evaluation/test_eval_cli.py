@@ -76,10 +76,10 @@ def test_lirm_eval_writes_the_markdown_table(tmp_path, tiny_checkpoint):
 def test_lirm_eval_refuses_a_bad_set_and_a_missing_checkpoint(tmp_path, tiny_checkpoint):
     done = subprocess.run([sys.executable, "-m", "lirm.engine.cli", "eval", str(tiny_checkpoint), "--set", str(tmp_path)],
                           capture_output=True, text=True)
-    assert done.returncode == 2 and "not 'synthetic', 'gltf' or a capture folder" in done.stderr
+    assert done.returncode == 3 and "not 'synthetic', 'gltf' or a capture folder" in done.stderr
     done = subprocess.run([sys.executable, "-m", "lirm.engine.cli", "eval", str(tmp_path / "none.safetensors")],
                           capture_output=True, text=True)
-    assert done.returncode == 2 and "does not exist" in done.stderr
+    assert done.returncode == 3 and "does not exist" in done.stderr
 
 
 def test_gltf_heldout_set_renders_the_models_under_the_hdris(renderer, shared_data):

@@ -58,7 +58,7 @@ def test_lirm_suggest_on_a_capture_with_and_without_a_reconstruction(lego_captur
     assert "1. azimuth" in captured.out and "3. azimuth" in captured.out and "of the surface newly covered" in captured.out
     heat = cv2.imread(str(capture / "guidance" / "heat_map.png"))
     assert heat is not None and heat.shape[1] > 24 * 24
-    assert main(["suggest", str(tmp_path / "nowhere")]) == 2
+    assert main(["suggest", str(tmp_path / "nowhere")]) == 3
 
 
 def test_lirm_suggest_after_reconstruction_uses_the_mesh(lego_capture, tmp_path, capsys):

@@ -76,9 +76,9 @@ def test_reconstruct_with_a_checkpoint_and_bad_ones(lego_capture, tmp_path, caps
     assert "UNTRAINED" not in err and "tiny.safetensors" in out
     broken = tmp_path / "broken.safetensors"
     broken.write_bytes(ckpt.read_bytes()[:1000])
-    assert main(["reconstruct", str(capture), "--checkpoint", str(broken)] + FAST) == 2
+    assert main(["reconstruct", str(capture), "--checkpoint", str(broken)] + FAST) == 3
     assert "broken.safetensors" in capsys.readouterr().err
-    assert main(["reconstruct", str(tmp_path), "--preset", "tiny"]) == 2
+    assert main(["reconstruct", str(tmp_path), "--preset", "tiny"]) == 3
     assert "not a capture folder" in capsys.readouterr().err
 
 
@@ -116,7 +116,7 @@ def test_export_writes_a_valid_glb_of_the_latest_update(lego_capture, tmp_path, 
     capture = tmp_path / "capture"
     shutil.copytree(lego_capture, capture)
     monkeypatch.setattr(pretrained, "SHIPPED", {})  # untrained weights: the warning must reach the user
-    assert main(["export", str(capture), "-o", str(tmp_path / "a.glb")]) == 2
+    assert main(["export", str(capture), "-o", str(tmp_path / "a.glb")]) == 3
     assert "no reconstruction yet" in capsys.readouterr().err
     assert main(["reconstruct", str(capture), "--updates", "1"] + FAST) == 0
     out = tmp_path / "asset.glb"
@@ -146,9 +146,9 @@ def test_one_more_update_on_chosen_frames_and_stepping_back(lego_capture, tmp_pa
     summary = json.loads((capture / "reconstruction" / "summary.json").read_text())
     assert [u["frames"] for u in summary["updates"]] == [frames[:3], [frames[6]]]
     capsys.readouterr()
-    assert main(["reconstruct", str(capture), "--frames", "nope"] + FAST) == 2
+    assert main(["reconstruct", str(capture), "--frames", "nope"] + FAST) == 3
     assert "no prepared view for nope" in capsys.readouterr().err
-    assert main(["reconstruct", str(capture), "--frames", frames[0], "--after", "7"] + FAST) == 2
+    assert main(["reconstruct", str(capture), "--frames", frames[0], "--after", "7"] + FAST) == 3
     assert "cannot continue after update 7" in capsys.readouterr().err
 
 

@@ -42,7 +42,7 @@ def test_holdout_split_keeps_every_kth_view_out():
 def test_refine_is_a_step_of_the_history_that_export_and_suggest_read(capture, tmp_path, capsys):
     from lirm.engine.export.gltf_validation import validate_gltf
 
-    assert main(["refine", str(capture), "--init", "lirm"] + QUICK) == 2
+    assert main(["refine", str(capture), "--init", "lirm"] + QUICK) == 3
     assert "no LIRM update to start from" in capsys.readouterr().err
     assert main(["refine", str(capture), "--init", "hull", "--holdout-every", "4"] + QUICK) == 0
     out = capsys.readouterr().out

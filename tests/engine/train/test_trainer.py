@@ -132,4 +132,4 @@ def test_cli_train_reports_broken_environment_files_and_goes_on(tmp_path, shared
     assert "1 usable environments, 1 skipped" in done.stderr and "skipped broken.hdr" in done.stderr
     (envs / "good.hdr").unlink()
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
-    assert done.returncode == 2 and "no usable HDR environments" in done.stderr
+    assert done.returncode == 3 and "no usable HDR environments" in done.stderr
