@@ -240,6 +240,14 @@ class LirmApp:
             self.viewport.set_asset(path, frame=self.viewport.scene is None)
         except Exception as err:  # a damaged preview must not take the window down
             self.state.say(f"cannot show {path}: {err}", "error")
+            return
+        from lirm.engine.export.glb_placement import read_placement
+
+        placement = read_placement(path) if path is not None else None
+        if placement is not None and self.state.capture_dir is not None:
+            # The export stands each asset on the ground by its own extent: cameras, coverage and the
+            # field are drawn with the same placement as the mesh.
+            self.world_from_capture = placement
 
     def _coverage_mesh(self):
         """The guidance surface coloured by how many cameras see each vertex well: red none, green 3+."""

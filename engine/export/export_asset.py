@@ -54,9 +54,12 @@ def _check_writable(path: Path) -> None:
     check_writable_output(path, "the asset", make_parents=False, example="asset.glb")
 
 
-def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig(), world_transform: np.ndarray | None = None,
+def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig(),
+                 world_transform: np.ndarray | Callable[[np.ndarray], np.ndarray] | None = None,
                  progress: Progress | None = None, context=None) -> ExportResult:
-    """`context`: a moderngl context to rasterise with (a headless one is made when None)."""
+    """`context`: a moderngl context to rasterise with (a headless one is made when None).
+    `world_transform`: a 4x4 from the field's frame to the exported one, or a function of the mesh's
+    vertices that returns it (to place the object by its own extent, e.g. standing on the ground)."""
     path = Path(path)
     if path.suffix.lower() != ".glb":
         raise LirmUserError(f"{path}: the output must be a .glb file")
@@ -70,6 +73,8 @@ def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig()
         return time.perf_counter()
 
     mesh = extract_field_mesh(field_, config.mesh, progress=lambda message, k, n: stage(message, k), timings=seconds)
+    if callable(world_transform):
+        world_transform = world_transform(np.asarray(mesh.vertices, np.float64))
     t = stage(f"unwrapping {len(mesh.faces)} faces", 3)
     uv_mesh = unwrap(mesh, AtlasConfig(config.texture_size, config.atlas_padding))
     seconds["unwrap"] = time.perf_counter() - t

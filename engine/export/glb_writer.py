@@ -21,6 +21,8 @@ from lirm.engine.errors import LirmUserError
 from lirm.engine.io.atomic_files import atomic_write
 from lirm.engine.io.images import encode_png
 
+from .glb_placement import EXTRAS_KEY
+
 Z_UP_TO_Y_UP = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0, -1.0, 0, 0], [0, 0, 0, 1.0]])
 
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
@@ -113,7 +115,10 @@ def glb_bytes(mesh: TexturedMesh, world_transform: np.ndarray | None = None) -> 
     document = {
         "asset": {"version": "2.0", "generator": "LIRM Studio"},
         "scene": 0,
-        "scenes": [{"nodes": [0]}],
+        # The similarity from the field's frame (the capture's normalised one) to this file's (before
+        # the +Z -> +Y turn): lets a viewer draw the capture's cameras where the asset is.
+        "scenes": [{"nodes": [0], "extras": {EXTRAS_KEY: (
+            np.eye(4) if world_transform is None else np.asarray(world_transform, np.float64)).round(9).tolist()}}],
         "nodes": [{"mesh": 0, "name": mesh.name}],
         "meshes": [{"name": mesh.name, "primitives": [{"attributes": attributes, "indices": indices, "material": 0, "mode": 4}]}],
         "materials": [material],

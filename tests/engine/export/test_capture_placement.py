@@ -1,0 +1,50 @@
+"""Where an exported capture asset stands (issue 21, case 9): its lowest point on glTF's ground
+(y = 0), its base centred on the vertical axis, and the placement recorded in the file so that a
+viewer can draw the capture's cameras where the asset is."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import struct
+
+import numpy as np
+
+from lirm.engine.cli import main
+from lirm.engine.export.capture_export import standing_on_the_ground
+from lirm.engine.export.glb_placement import read_placement
+
+
+def _gltf(path) -> dict:
+    data = path.read_bytes()
+    length, _ = struct.unpack("<II", data[12:20])
+    return json.loads(data[20:20 + length])
+
+
+def test_standing_on_the_ground_moves_the_lowest_point_to_zero_and_centres_the_base():
+    rng = np.random.default_rng(0)
+    body = rng.uniform([-0.3, -0.3, -0.5], [0.3, 0.3, 0.4], (500, 3))
+    handle = rng.uniform([0.3, -0.05, 0.0], [0.6, 0.05, 0.3], (100, 3))  # off to one side, above the base
+    vertices = np.vstack([body, handle, [[0.3, 0.3, -0.5], [-0.3, -0.3, -0.5]]])
+    transform = np.diag([2.0, 2.0, 2.0, 1.0])
+    transform[:3, 3] = (1.0, -1.0, 0.37)
+    placed = vertices @ standing_on_the_ground(transform, vertices)[:3, :3].T + standing_on_the_ground(transform, vertices)[:3, 3]
+    assert abs(placed[:, 2].min()) < 1e-9
+    base = placed[placed[:, 2] < 0.02 * np.ptp(placed[:, 2])]
+    assert np.allclose(0.5 * (base[:, :2].min(0) + base[:, :2].max(0)), 0.0, atol=1e-9)  # not pulled by the handle
+
+
+def test_an_exported_capture_stands_on_y_zero(lego_capture, tmp_path, capsys):
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    assert main(["reconstruct", str(capture), "--updates", "1", "--preset", "tiny", "--novel-views", "1",
+                 "--render-size", "24", "--grid-resolution", "48"]) == 0
+    out = tmp_path / "asset.glb"
+    assert main(["export", str(capture), "-o", str(out), "--faces", "2000", "--texture", "64", "--grid", "64"]) == 0
+    gltf = _gltf(out)
+    position = gltf["accessors"][gltf["meshes"][0]["primitives"][0]["attributes"]["POSITION"]]
+    assert abs(position["min"][1]) < 1e-6  # glTF is +Y up
+    recorded = np.array(gltf["scenes"][0]["extras"]["lirm_world_from_field"])
+    assert recorded.shape == (4, 4) and np.allclose(recorded[3], (0, 0, 0, 1))
+    assert np.array_equal(read_placement(out), recorded)  # what the app draws the cameras and field with
+    assert read_placement(tmp_path / "missing.glb") is None
