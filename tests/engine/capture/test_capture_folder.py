@@ -79,6 +79,10 @@ def test_refuses_non_captures_and_occupied_folders(tmp_path):
         Capture.create(tmp_path / "photos")
     capture = _capture(tmp_path)
     capture.save()
+    with pytest.raises(LirmUserError, match="--resume"):  # its stages never ran: an interrupted capture
+        Capture.create(capture.root)
+    capture.settings["completed"] = ["pose", "normalize", "masks", "crops"]
+    capture.save()
     with pytest.raises(LirmUserError, match="--add"):
         Capture.create(capture.root)
     (capture.root / "capture.json").write_text("{ broken")

@@ -80,10 +80,17 @@ def test_nothing_posable_exits_non_zero(tmp_path, capsys, shared_data):
     folder.mkdir()
     (folder / "a.jpg").write_text("not a photo")
     cv2.imwrite(str(folder / "b.png"), np.zeros((1, 1, 3), np.uint8))
-    code = main(["capture", str(folder), "-o", str(tmp_path / "capture")])
-    out = capsys.readouterr().out
-    assert code == 1
-    assert "nothing could be posed" in out and "skipped a.jpg" in out
+    # No usable photo at all is bad input (exit 3), named file by file, and leaves no capture behind.
+    assert main(["capture", str(folder), "-o", str(tmp_path / "capture")]) == 3
+    err = capsys.readouterr().err
+    assert "a.jpg: not an image" in err and "b.png: too small" in err and not (tmp_path / "capture").exists()
+    # Real photos that cannot be posed together (one fox, one cake): the run finishes with exit 1.
+    unrelated = tmp_path / "unrelated"
+    unrelated.mkdir()
+    shutil.copy(_fox(shared_data, 1)[0], unrelated / "fox.jpg")
+    shutil.copy(sorted((shared_data / "real_vggsfm_cake" / "images").glob("*.jpg"))[0], unrelated / "cake.jpg")
+    assert main(["capture", str(unrelated), "-o", str(tmp_path / "capture2"), "--max-side", "400"]) == 1
+    assert "nothing could be posed" in capsys.readouterr().out
 
 
 def test_imported_poses_and_alpha_masks(tmp_path, shared_data):
