@@ -55,7 +55,7 @@ class ExportSettings:
     path: str = ""  # default: <capture>/export/asset.glb
     faces: int = 20_000
     texture: int = 1024
-    grid: int = 192
+    grid: int = 256  # the same default as `lirm export --grid`
     turntable_frames: int = 24
 
 

@@ -137,10 +137,12 @@ def _write_crash_report(argv: list[str]) -> Path | None:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="lirm", description="LIRM Studio: photos of an object to a relightable 3D asset.")
     parser.add_argument("-v", "--verbose", action="store_true", help="more logging")
+    parser.add_argument("--version", action="version", version=f"lirm (LIRM Studio) {_version()}")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
 
     ap = sub.add_parser("app", help="the desktop app: capture, progressive reconstruction, relighting, guidance and export in one window")
-    ap.add_argument("capture", type=Path, nargs="?", help="a capture folder to open (default: an empty project)")
+    ap.add_argument("capture", type=Path, nargs="?", help="a capture folder to open (default: the last capture "
+                    "opened; an empty project the first time, or with --new)")
     ap.add_argument("--demo", action="store_true", help="open the built-in demo capture (made once in the background)")
     ap.add_argument("--new", action="store_true", help="start with an empty project instead of reopening the last capture")
     ap.add_argument("--size", type=_size, default=(1280, 800), help="window size WxH (default 1280x800)")
@@ -229,7 +231,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     ex = sub.add_parser("export", help="the capture's latest reconstruction as a textured PBR .glb")
     ex.add_argument("capture", type=Path, help="a capture folder with a reconstruction (`lirm reconstruct`)")
-    ex.add_argument("-o", "--out", type=Path, required=True, help="the .glb to write (replaced only by a complete file)")
+    ex.add_argument("-o", "--out", type=Path, help="the .glb to write (default CAPTURE/export/asset.glb, as the app; "
+                    "replaced only by a complete file)")
     ex.add_argument("--faces", type=int, default=20_000, help="face budget after decimation (default 20000)")
     ex.add_argument("--texture", type=int, default=1024, help="texture side in pixels, 64..4096 (default 1024)")
     ex.add_argument("--grid", type=int, default=256, help="marching-cubes grid per side (default 256)")
@@ -479,7 +482,32 @@ def _check_output(path: Path, what: str, **kwargs) -> None:
 
 def _require_capture(folder: Path) -> None:
     if not (folder / "capture.json").exists():
+        photos = folder.is_dir() and any(p.suffix.lower() in (".jpg", ".jpeg", ".png") for p in folder.iterdir())
+        if photos:  # a photo folder given where a capture was expected: capture it into a new folder
+            target = folder.parent / f"{folder.name}_capture"
+            raise LirmUserError(f"{folder} holds photos, not a capture (no capture.json); make a capture of them first "
+                                f"with `lirm capture {folder} -o {target}` and use {target}")
         raise LirmUserError(f"{folder} is not a capture folder (no capture.json); make one with `lirm capture PHOTOS -o {folder}`")
+
+
+def _exports_a_refinement(capture: Path, update: int | None) -> bool:
+    """Whether the step `lirm export` takes is a refinement (fitted to the photos, not the weights' alone)."""
+    from .capture.capture_folder import Capture
+
+    updates = Capture.open(capture).updates
+    if not updates:
+        return False
+    entry = updates[-1] if update is None or not 1 <= update <= len(updates) else updates[update - 1]
+    return entry.get("kind") == "refine"
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("lirm")
+    except PackageNotFoundError:
+        return "unknown (not installed)"
 
 
 def _model_with_warning(checkpoint):
@@ -783,6 +811,9 @@ def _run_export(args: argparse.Namespace) -> int:
 
     _check_export_options(args)
     _require_capture(args.capture)
+    if args.out is None:
+        args.out = args.capture / "export" / "asset.glb"
+        args.out.parent.mkdir(parents=True, exist_ok=True)
     _check_output(args.out, "the asset (-o)", make_parents=False, example=f"{args.capture.name or 'asset'}.glb")
     if args.obj:
         _check_output(args.out.with_suffix(".obj"), "the OBJ copy (--obj)", make_parents=False)
@@ -793,6 +824,9 @@ def _run_export(args: argparse.Namespace) -> int:
                                     progress=_export_progress, update=args.update)
     if not source.trained:
         print(f"WARNING: exported from UNTRAINED weights ({source.description}): the asset does not look like the object", file=sys.stderr)
+    elif source.note and not _exports_a_refinement(args.capture, args.update):
+        # The caveat about the shipped weights, as every command that uses them prints it.
+        print(f"about these weights: {source.note}", file=sys.stderr)
     timings = ", ".join(f"{k} {v:.1f} s" for k, v in result.seconds.items())
     print(f"{result.path}: {result.faces} faces, {result.vertices} vertices, {result.texture_size}px textures ({timings})")
     return 0

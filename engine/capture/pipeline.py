@@ -58,6 +58,7 @@ class CaptureSummary:
     registered: int
     masked: int
     prepared: int
+    nothing_new: bool = False  # `--add` where every photo was skipped: no stage ran
 
     @property
     def usable(self) -> bool:
@@ -147,7 +148,9 @@ def add_to_capture(root: str | Path, inputs: str | Path | int, config: CaptureCo
     if not new:
         capture.log("add", added=0)
         capture.save()
-        return _summary(capture)
+        summary = _summary(capture)
+        summary.nothing_new = True
+        return summary
     capture.settings.pop("completed", None)
     return _finish(capture, config, progress, cancel, new_frames=new)
 

@@ -29,7 +29,9 @@ def format_capture_report(summary: CaptureSummary, reference: Path | None = None
             lines.append(f"    {state.record.original.name} ({frame_id}): {state.mask_warning}")
     lines.append(f"  network views prepared: {summary.prepared}")
     timings = capture.settings.get("timings", {})
-    if timings:
+    if summary.nothing_new:
+        lines.append("  nothing new was added (every photo was skipped, see above): no stage ran and the capture is unchanged")
+    elif timings:
         lines.append("  seconds: " + ", ".join(f"{k} {v:.1f}" for k, v in timings.items()))
     if reference is not None and summary.registered:
         lines.append(_reference_errors(capture, reference))

@@ -1,0 +1,67 @@
+"""The command line as a new user meets it (issue 21, case 12 and the export caveat of case 14)."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from lirm.engine.cli import main
+
+FAST = ["--preset", "tiny", "--novel-views", "1", "--render-size", "24", "--grid-resolution", "48"]
+
+
+def test_version_prints_the_package_version():
+    result = subprocess.run([sys.executable, "-m", "lirm.engine.cli", "--version"], capture_output=True, text=True)
+    assert result.returncode == 0 and result.stdout.startswith("lirm (LIRM Studio) 0.")
+
+
+def test_app_help_says_what_opens_by_default(capsys):
+    with pytest.raises(SystemExit):
+        main(["app", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "default: the last capture opened" in text and "with --new" in text
+
+
+def test_reconstruct_on_a_photo_folder_suggests_a_capture_that_works(tmp_path, shared_data, capsys):
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    shutil.copy(shared_data / "synth_nerf_lego_train" / "train" / "r_0.png", photos / "r_0.png")
+    assert main(["reconstruct", str(photos)]) == 3
+    err = capsys.readouterr().err
+    suggested = tmp_path / "photos_capture"
+    assert f"lirm capture {photos} -o {suggested}" in err and not suggested.exists()
+
+
+def test_adding_only_skipped_photos_says_nothing_ran(lego_capture, tmp_path, shared_data, capsys):
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    again = tmp_path / "again"
+    again.mkdir()
+    shutil.copy(shared_data / "synth_nerf_lego_train" / "train" / "r_0.png", again / "r_0.png")  # already in it
+    capsys.readouterr()
+    assert main(["capture", "--add", str(again), str(capture)]) == 0
+    out = capsys.readouterr().out
+    assert "nothing new was added" in out and "seconds:" not in out
+
+
+def test_export_defaults_to_the_capture_and_carries_the_weights_caveat(lego_capture, tmp_path, capsys):
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    assert main(["reconstruct", str(capture), "--updates", "1", "--novel-views", "1", "--render-size", "24",
+                 "--grid-resolution", "48"]) == 0
+    capsys.readouterr()
+    assert main(["export", str(capture), "--faces", "800", "--texture", "64", "--grid", "48"]) == 0
+    captured = capsys.readouterr()
+    assert (capture / "export" / "asset.glb").is_file() and str(capture / "export" / "asset.glb") in captured.out
+    assert "about these weights" in captured.err
+
+
+def test_the_app_and_the_cli_export_on_the_same_grid():
+    from lirm.app.app_state import ExportSettings
+    from lirm.engine.cli import build_parser
+
+    args = build_parser().parse_args(["export", "somewhere"])
+    assert ExportSettings().grid == args.grid
