@@ -12,6 +12,7 @@ from lirm.renderer.context import GLContextError
 
 from . import progress_events
 from .errors import LirmResourceError, LirmUsageError, LirmUserError
+from .progress_lines import progress_bar
 
 # Exit codes (README "Exit codes"): what went wrong, for scripts and for the app's background jobs.
 EXIT_OK = 0  # done
@@ -48,6 +49,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)  # bad usage: argparse prints it and exits with EXIT_USAGE (2)
     _configure_logging(args.verbose)
+    for stream in (sys.stdout, sys.stderr):  # a log file sees each line when it is printed, not at exit
+        if hasattr(stream, "reconfigure") and not stream.isatty():
+            try:
+                stream.reconfigure(line_buffering=True)
+            except (ValueError, OSError):
+                pass
     try:
         return args.run(args)
     except LirmUsageError as err:
@@ -531,9 +538,7 @@ def _bar_updater(bar):
 
 
 def _progress_bar(total: int, desc: str):
-    from tqdm import tqdm
-
-    return tqdm(total=total, desc=desc, unit="view", file=sys.stderr, disable=None)
+    return progress_bar(desc, total, unit="view")
 
 
 def _run_render(args: argparse.Namespace) -> int:
@@ -607,14 +612,12 @@ def _run_capture(args: argparse.Namespace) -> int:
     bars: dict = {}
 
     def progress(stage: str, done: int, total: int) -> None:
-        from tqdm import tqdm
-
         progress_events.emit(stage, done, total)
         bar = bars.get(stage)
         if bar is None:
             for other in bars.values():
                 other.close()
-            bar = bars[stage] = tqdm(total=total, desc=stage, file=sys.stderr, disable=None, leave=False)
+            bar = bars[stage] = progress_bar(stage, total, leave=False)
         bar.total = total
         bar.n = done
         bar.refresh()
@@ -681,8 +684,6 @@ def _run_capture(args: argparse.Namespace) -> int:
 def _run_reconstruct(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from tqdm import tqdm
-
     from .model.pretrained import load_model
     from .reconstruction.session import ReconstructConfig, run_reconstruction
 
@@ -699,7 +700,7 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
     config = replace(ReconstructConfig(), views_per_update=args.views_per_update, updates=args.updates, order=args.order,
                      novel_views=args.novel_views, render_size=args.render_size,
                      occupancy=replace(ReconstructConfig().occupancy, resolution=args.grid_resolution))
-    bar = tqdm(desc="LIRM updates", unit="update", file=sys.stderr, disable=None)
+    bar = progress_bar("LIRM updates", unit="update")
 
     def progress(stage: str, done: int, total: int) -> None:
         progress_events.emit(stage, done, total)
@@ -733,7 +734,6 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
 
 def _run_refine(args: argparse.Namespace) -> int:
     import torch
-    from tqdm import tqdm
 
     from .capture.capture_folder import Capture
     from .export.capture_export import reconstruction_model
@@ -768,8 +768,7 @@ def _run_refine(args: argparse.Namespace) -> int:
     source = reconstruction_model(Capture.open(args.capture), args.checkpoint)
     budget = f"{config.minutes:g} min" if config.minutes else f"{config.iterations} steps"
     print(f"refining {args.capture} on {device} for {budget} (Ctrl-C stops and keeps the best state so far)", file=sys.stderr)
-    bar = tqdm(total=1000, desc="refine", unit="‰", file=sys.stderr, disable=None,
-               bar_format="{desc}: {percentage:3.0f}%|{bar}| {postfix}")
+    bar = progress_bar("refine", 1000, unit="‰", bar_format="{desc}: {percentage:3.0f}%|{bar}| {postfix}")
 
     def progress(tick) -> None:
         progress_events.emit(f"refining: step {tick.step}, loss {tick.loss:.4f}, ETA {tick.eta:.0f} s", int(1000 * tick.fraction), 1000)
@@ -1045,10 +1044,8 @@ def _run_train(args: argparse.Namespace) -> int:
               f"{stage.batch_scenes} scenes/step, {stage.update_sets} update sets, {stage.samples_per_ray} samples/ray, "
               f"{stage.crop}px crops of {stage.target_resolution}px targets, 1/beta {stage.inv_beta[0]:g} -> {stage.inv_beta[1]:g}",
               file=sys.stderr)
-    from tqdm import tqdm
-
-    bar = tqdm(desc=f"stage {args.stage}", unit="step", file=sys.stderr, disable=None if rank0 else True,
-               total=min(stage.steps, args.max_steps or stage.steps))
+    bar = progress_bar(f"stage {args.stage}", min(stage.steps, args.max_steps or stage.steps), unit="step",
+                       disable=None if rank0 else True)
 
     def progress(record: dict) -> None:
         bar.n = record["step"]

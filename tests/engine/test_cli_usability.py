@@ -65,3 +65,41 @@ def test_the_app_and_the_cli_export_on_the_same_grid():
 
     args = build_parser().parse_args(["export", "somewhere"])
     assert ExportSettings().grid == args.grid
+
+
+def test_progress_reaches_a_log_file_as_it_happens(lego_capture, tmp_path):
+    """`lirm reconstruct CAPTURE > log 2>&1`: progress lines are in the log while it runs (line
+    progress when not on a terminal), not only at the end."""
+    import time
+
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    log = tmp_path / "log.txt"
+    with open(log, "w") as out:
+        process = subprocess.Popen([sys.executable, "-m", "lirm.engine.cli", "reconstruct", str(capture), "--updates", "2",
+                                    *FAST], stdout=out, stderr=subprocess.STDOUT)
+        seen_while_running = ""
+        while process.poll() is None:
+            text = log.read_text()
+            if "LIRM updates:" in text:
+                seen_while_running = text
+            time.sleep(0.2)
+    assert process.returncode == 0
+    assert "LIRM updates: 0" in seen_while_running  # the stage's first line, written before the run ended
+    assert "LIRM updates: 2/2 update (100%)" in log.read_text()
+    assert "\r" not in log.read_text()
+
+
+def test_line_progress_writes_a_line_per_stage_and_at_most_one_per_interval():
+    import io
+
+    from lirm.engine.progress_lines import progress_bar
+
+    out = io.StringIO()
+    bar = progress_bar("crops", 100, unit="view", file=out, every=3600)
+    for _ in range(100):
+        bar.update(1)
+    bar.close()
+    lines = out.getvalue().splitlines()
+    assert lines[0].startswith("crops: 0/100 view (0%)") and lines[-1].startswith("crops: 100/100 view (100%)")
+    assert len(lines) <= 3
