@@ -252,6 +252,8 @@ def build_parser() -> argparse.ArgumentParser:
     sg = sub.add_parser("suggest", help="where to shoot next: ranked views, a sentence each, and a view-sphere heat map")
     sg.add_argument("capture", type=Path, help="a capture folder (with or without a reconstruction)")
     sg.add_argument("--k", type=int, default=4, help="how many views to suggest (default 4)")
+    sg.add_argument("--can-turn", action="store_true", help="the object can be turned over: also suggest views from below "
+                    "it (by default, an object standing on something is only shot from above)")
     sg.add_argument("--heat-map", type=Path, help="write the view-sphere heat map here (default CAPTURE/guidance/heat_map.png)")
     sg.add_argument("--checkpoint", type=Path, help="the weights the reconstruction was made with (default: as lirm reconstruct)")
     sg.set_defaults(run=_run_suggest)
@@ -842,20 +844,24 @@ def _run_suggest(args: argparse.Namespace) -> int:
     _check_output(args.capture / "guidance", "the capture's guidance folder", folder=True)
     ctx = create_headless_context()
     try:
-        result = suggest_for_capture(ctx, args.capture, args.k, args.checkpoint)
+        result = suggest_for_capture(ctx, args.capture, args.k, args.checkpoint, can_turn=args.can_turn)
     finally:
         ctx.release()
     for note in result.notes:
         print(f"note: {note}", file=sys.stderr)
     print(f"surface: {result.surface}; covered now {100 * result.coverage_before:.0f}%, "
           f"after these shots {100 * result.coverage_after:.0f}%")
+    print("distances are in object radii (the object fits a ball of radius 1 in the capture's frame); "
+          f"your photos were taken from about {result.photo_distance:.1f}")
     for n, s in enumerate(result.suggestions, start=1):
-        print(f"{n}. azimuth {s.azimuth_deg:.0f}°, elevation {s.elevation_deg:.0f}°, distance {s.distance:.2f}: "
-              f"{s.sentence} ({_shot_worth(s.new_coverage)})")
+        where = "from your last photo" if n == 1 else f"then, from view {n - 1}"
+        sentence = s.sentence[:1].lower() + s.sentence[1:]
+        print(f"{n}. azimuth {s.azimuth_deg:.0f}°, elevation {s.elevation_deg:.0f}°, distance {s.distance:.1f} radii: "
+              f"{where}, {sentence} ({_shot_worth(s.new_coverage)})")
     if not result.suggestions:
         print("the surface is covered from every reachable angle: no more views needed")
     heat_path = args.heat_map or args.capture / "guidance" / "heat_map.png"
-    print(f"heat map: {write_heat_map(heat_path, result.heat_map, result.suggestions)}")
+    print(f"heat map: {write_heat_map(heat_path, result.heat_map, result.suggestions, result.candidates)}")
     files = write_guidance(args.capture / "guidance", result)
     print(f"for the app: {files['suggestions']} and {files['coverage']} (per-vertex coverage)")
     return 0

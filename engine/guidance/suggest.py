@@ -9,7 +9,7 @@ that the object fits the unit sphere), with a message saying so. Cameras are the
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
@@ -21,7 +21,7 @@ from lirm.engine.errors import LirmUserError
 from lirm.engine.io.images import write_png
 
 from .coverage import SurfaceCoverage
-from .next_views import CandidateConfig, Suggestion, suggest_next_views
+from .next_views import CandidateConfig, Suggestion, camera_angles, suggest_next_views
 
 
 @dataclass
@@ -36,6 +36,8 @@ class CaptureSuggestions:
     vertices: np.ndarray  # (V, 3) the surface, in the capture's normalised frame
     faces: np.ndarray  # (F, 3)
     uncertainty: np.ndarray | None  # (V,) the model's uncertainty in [0, 1], None before a reconstruction
+    candidates: CandidateConfig = field(default_factory=CandidateConfig)  # the heat map's rows and columns
+    photo_distance: float = 2.5  # the photos' median distance from the object's centre (normalised units)
 
 
 BOUNDING_SPHERE_RADIUS = 0.8  # the normalised object fits the unit sphere with some room
@@ -92,11 +94,21 @@ def occluding_coverage(renderer, mesh: trimesh.Trimesh, occluder_faces: int | No
                            points=mesh.vertices, point_normals=mesh.vertex_normals)
 
 
+def stands_on_something(capture: Capture, cameras: list) -> bool:
+    """Whether the object rests on a floor or table: a support plane under it, or no photo ever taken
+    from below its centre (a mug on a table cannot be shot from underneath unless it is turned over)."""
+    plane = capture.normalization.plane if capture.normalization is not None else None
+    if plane is not None and float(plane[0][2]) > 0.9:
+        return True
+    return bool(cameras) and min(camera_angles(c)[1] for c in cameras) > -5.0
+
+
 def suggest_for_capture(renderer, capture_dir: str | Path, k: int = 4, checkpoint=None, grid: int = 64,
                         timings: dict[str, float] | None = None,
-                        occluder_faces: int | None = OCCLUDER_FACES) -> CaptureSuggestions:
+                        occluder_faces: int | None = OCCLUDER_FACES, can_turn: bool = False) -> CaptureSuggestions:
     """`timings`, when given, receives the seconds of each part (lirm bench suggest).
-    `occluder_faces`: see occluding_coverage (None: the mesh itself)."""
+    `occluder_faces`: see occluding_coverage (None: the mesh itself). `can_turn`: the object can be
+    turned over, so views from below it are reachable even when it stands on something."""
     clock = _Clock(timings)
     capture = Capture.open(capture_dir)
     cameras = [capture.cameras[f] for f in sorted(capture.cameras)]
@@ -116,12 +128,17 @@ def suggest_for_capture(renderer, capture_dir: str | Path, k: int = 4, checkpoin
     spread = np.ptp([c.center for c in cameras], axis=0).max() if len(cameras) > 1 else 0.0
     if len(cameras) > 1 and spread < 0.05:
         notes.append("all views were taken from about the same spot: walk round the object")
+    config = CandidateConfig()
+    if not can_turn and stands_on_something(capture, cameras):
+        config = CandidateConfig(elevations_deg=tuple(e for e in config.elevations_deg if e >= 0.0))
+        notes.append("the object stands on something (no photo from below it): suggestions stay above it; "
+                     "pass --can-turn if it can be turned over")
     coverage = occluding_coverage(renderer, mesh, occluder_faces)
     try:
         looks = coverage.view_cosines(cameras)
         vertex_coverage = (looks > 0).sum(axis=0).astype(np.int32)
         clock.lap("coverage")
-        suggestions, heat = suggest_next_views(coverage, cameras, k, weights=weights, config=CandidateConfig(),
+        suggestions, heat = suggest_next_views(coverage, cameras, k, weights=weights, config=config,
                                                quality_now=looks.max(axis=0))
         clock.lap("candidates")
     finally:
@@ -130,7 +147,8 @@ def suggest_for_capture(renderer, capture_dir: str | Path, k: int = 4, checkpoin
     # Each suggestion's new coverage counts what the ones before it left: together, what the shots add.
     return CaptureSuggestions(suggestions, heat, before, before + sum(s.new_coverage for s in suggestions),
                               vertex_coverage, surface, notes, np.asarray(mesh.vertices, np.float32),
-                              np.asarray(mesh.faces, np.int32), uncertainty)
+                              np.asarray(mesh.faces, np.int32), uncertainty, config,
+                              float(np.median([camera_angles(c)[2] for c in cameras])))
 
 
 def write_guidance(folder: Path, result: CaptureSuggestions) -> dict[str, Path]:
@@ -176,20 +194,37 @@ class _Clock:
 
 def write_heat_map(path: Path, heat: np.ndarray, suggestions: list[Suggestion], config: CandidateConfig = CandidateConfig()) -> Path:
     """Azimuth across, elevation up; brighter = more surface gained; suggestions numbered."""
-    cell = 24
+    cell, left, top, bottom, legend_w = 24, 60, 24, 48, 110
     rows, cols = heat.shape
-    norm = heat / max(float(heat.max()), 1e-9)
-    image = cv2.applyColorMap((norm[::-1] * 255).astype(np.uint8), cv2.COLORMAP_INFERNO)
+    peak = max(float(heat.max()), 1e-9)
+    image = cv2.applyColorMap((heat[::-1] / peak * 255).astype(np.uint8), cv2.COLORMAP_INFERNO)
     image = cv2.resize(image, (cols * cell, rows * cell), interpolation=cv2.INTER_NEAREST)
-    pad = np.full((rows * cell + 30, cols * cell + 40, 3), 255, np.uint8)
-    pad[:rows * cell, 40:] = image
+    height, width = top + rows * cell + bottom, left + cols * cell + legend_w
+    pad = np.full((height, width, 3), 255, np.uint8)
+    pad[top:top + rows * cell, left:left + cols * cell] = image
+
+    def text(s: str, x: int, y: int, scale: float = 0.4, colour=(0, 0, 0), thickness: int = 1) -> None:
+        cv2.putText(pad, s, (x, y), cv2.FONT_HERSHEY_SIMPLEX, scale, colour, thickness, cv2.LINE_AA)
+
+    text("where to shoot next: surface each view would newly cover", left, 16, 0.45)
     for r, elevation in enumerate(config.elevations_deg[::-1]):
-        cv2.putText(pad, f"{elevation:.0f}", (2, r * cell + 16), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
+        text(f"{elevation:.0f}", left - 26, top + r * cell + 16)
     for c in range(0, cols, 3):
-        cv2.putText(pad, f"{c * config.azimuth_step_deg:.0f}", (40 + c * cell, rows * cell + 18), cv2.FONT_HERSHEY_SIMPLEX,
-                    0.4, (0, 0, 0), 1, cv2.LINE_AA)
+        text(f"{c * config.azimuth_step_deg:.0f}", left + c * cell, top + rows * cell + 16)
+    text("azimuth (degrees, 0 = the first photo's side)", left, top + rows * cell + 38)
+    label = np.full((14, rows * cell, 3), 255, np.uint8)  # the elevation axis title, written sideways
+    cv2.putText(label, "elevation (degrees)", (4, 11), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
+    pad[top:top + rows * cell, 2:16] = np.rot90(label).copy()
+    # Legend: the colour scale, from nothing new to the best candidate's share of the surface.
+    x0 = left + cols * cell + 16
+    ramp = cv2.applyColorMap(np.linspace(255, 0, rows * cell).astype(np.uint8)[:, None].repeat(16, axis=1), cv2.COLORMAP_INFERNO)
+    pad[top:top + rows * cell, x0:x0 + 16] = ramp
+    text("most", x0 + 20, top + 10)  # the gain weighs uncertain parts more: a relative scale
+    text("none", x0 + 20, top + rows * cell)
+    text("new", x0 + 20, top + rows * cell // 2 - 4)
+    text("surface", x0 + 20, top + rows * cell // 2 + 10)
     for n, s in enumerate(suggestions, start=1):
         c = int(round(s.azimuth_deg / config.azimuth_step_deg)) % cols
         r = rows - 1 - list(config.elevations_deg).index(s.elevation_deg)
-        cv2.putText(pad, str(n), (40 + c * cell + 7, r * cell + 17), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (80, 255, 80), 2, cv2.LINE_AA)
+        text(str(n), left + c * cell + 7, top + r * cell + 17, 0.5, (80, 255, 80), 2)
     return write_png(path, pad[..., ::-1])

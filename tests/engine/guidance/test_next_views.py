@@ -106,3 +106,29 @@ def test_once_all_is_covered_the_next_view_goes_where_it_is_seen_most_obliquely(
         assert binary == [] and np.all(first_binary == 0)
     finally:
         coverage.release()
+
+
+def test_suggest_speaks_in_units_says_what_each_move_is_from_and_stays_above_the_ground(lego_capture, tmp_path, capsys):
+    """Issue 21, case 13: the lego was photographed only from above (a model on a table): no
+    suggestion from below unless it can be turned over; distances carry their unit; each sentence
+    says what it is relative to; the heat map has its axis titles and a colour legend."""
+    import re
+    import shutil
+
+    import cv2
+
+    from lirm.engine.cli import main
+
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    assert main(["suggest", str(capture), "--k", "6"]) == 0
+    captured = capsys.readouterr()
+    assert "stands on something" in captured.err and "--can-turn" in captured.err
+    elevations = [float(e) for e in re.findall(r"elevation (-?\d+)°", captured.out)]
+    assert len(elevations) == 6 and min(elevations) >= 0
+    assert "distances are in object radii" in captured.out and "radii: from your last photo" in captured.out
+    assert "then, from view 1" in captured.out
+    heat = cv2.imread(str(capture / "guidance" / "heat_map.png"))
+    assert heat.shape[1] >= 24 * 24 + 60 + 100  # the map, the elevation axis and the legend
+    assert main(["suggest", str(capture), "--k", "6", "--can-turn"]) == 0
+    assert "stands on something" not in capsys.readouterr().err
