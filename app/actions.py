@@ -97,8 +97,18 @@ class AppActions:
         self.state.frames = frames
         self.state.updates = list(capture.updates)
         self.state.weights = capture.updates[-1].get("weights", "") if capture.updates else ""
+        self.state.real_size = capture.settings.get("real_size")
         known = {f.frame_id for f in frames if f.prepared}
         self.state.choices.selected = [f for f in self.state.choices.selected if f in known]
+
+    def set_real_size(self, height_m: float) -> Job | None:
+        """The object's real height: exports are in metres from then on (`lirm capture --real-size`)."""
+        if self.state.capture_dir is None or not height_m > 0:
+            self.state.say("give the object's height in centimetres (more than 0)", "warning")
+            return None
+        return self._start("capture", f"setting the height to {height_m:g} m",
+                           ["capture", str(self.state.capture_dir), "--real-size", f"height={height_m:g}"],
+                           lambda job: self._after_capture_job(job, "setting the real size"))
 
     def import_photos(self, inputs: str | Path, new_capture: str | Path | None = None) -> Job | None:
         """A folder of photos or a video: a new capture (at `new_capture`, default beside the photos),

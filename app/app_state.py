@@ -85,6 +85,7 @@ class AppState:
     updates: list[dict] = field(default_factory=list)  # capture.json's update history
     choices: SavedChoices = field(default_factory=SavedChoices)
     weights: str = ""  # which weights the reconstruction used, and whether they are trained
+    real_size: dict | None = None  # the object's stated height or width in metres (capture.json), None: arbitrary scale
     guidance: dict | None = None  # suggestions.json, once asked for
     coverage: dict | None = None  # surface_coverage.npz arrays
     messages: list[Message] = field(default_factory=list)

@@ -191,6 +191,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="refer to the original photos where they are instead of copying them into the capture")
     cap.add_argument("--fix-mask", metavar="FRAME_ID", help="INPUTS is a corrected mask (PNG, 255 = object) for this frame of "
                      "CAPTURE; the correction propagates to the other views")
+    cap.add_argument("--real-size", metavar="height=M|width=M", help="INPUTS is a capture: the object's real height (or "
+                     "largest width), e.g. height=0.095 or height=9.5cm; every export is then in metres")
     cap.add_argument("--check", action="store_true", help="INPUTS is a capture: check its files against capture.json, "
                      "make again what can be (crops, masks) and name what cannot")
     cap.add_argument("--undo-fix-mask", action="store_true", help="INPUTS is a capture: put back the masks the last --fix-mask replaced")
@@ -499,6 +501,19 @@ def _require_capture(folder: Path) -> None:
         raise LirmUserError(f"{folder} is not a capture folder (no capture.json); make one with `lirm capture PHOTOS -o {folder}`")
 
 
+def _parse_real_size(text: str) -> tuple[str, float]:
+    """'height=0.095', 'width=12cm', 'height=95 mm' -> ('height', metres)."""
+    import re
+
+    match = re.fullmatch(r"\s*(height|width)\s*=\s*([0-9]*\.?[0-9]+)\s*(m|cm|mm)?\s*", text)
+    if not match:
+        raise LirmUsageError(f"--real-size {text!r}: write height=METRES or width=METRES (e.g. height=0.095 or height=9.5cm)")
+    value = float(match.group(2)) * {"m": 1.0, "cm": 0.01, "mm": 0.001, None: 1.0}[match.group(3)]
+    if not 0.001 <= value <= 100.0:
+        raise LirmUsageError(f"--real-size {text!r}: {value:g} m is outside 1 mm..100 m")
+    return match.group(1), value
+
+
 def _exports_a_refinement(capture: Path, update: int | None) -> bool:
     """Whether the step `lirm export` takes is a refinement (fitted to the photos, not the weights' alone)."""
     from .capture.capture_folder import Capture
@@ -642,6 +657,18 @@ def _run_capture(args: argparse.Namespace) -> int:
             print(f"  not applied to {frame}: it would have removed {lost:.0%} of its mask; correct that view itself "
                   f"if it is wrong")
         print(f"  the replaced masks are kept in {fixed.backup}; `lirm capture --undo-fix-mask {args.capture}` puts them back")
+        return 0
+    if args.real_size:
+        from .capture.capture_folder import Capture
+
+        _require_capture(Path(args.inputs))
+        which, metres = _parse_real_size(args.real_size)
+        with capture_lock(args.inputs, "lirm capture --real-size"):
+            capture = Capture.open(args.inputs)
+            capture.settings["real_size"] = {which: metres}
+            capture.log("real size", **{which: metres})
+            capture.save()
+        print(f"{args.inputs}: the object is {metres:g} m {'tall' if which == 'height' else 'wide'}; exports are in metres from now on")
         return 0
     if args.check or args.resume:
         from .capture.capture_check import check_capture
@@ -830,6 +857,15 @@ def _run_export(args: argparse.Namespace) -> int:
         print(f"about these weights: {source.note}", file=sys.stderr)
     timings = ", ".join(f"{k} {v:.1f} s" for k, v in result.seconds.items())
     print(f"{result.path}: {result.faces} faces, {result.vertices} vertices, {result.texture_size}px textures ({timings})")
+    from .capture.capture_folder import Capture
+
+    real = Capture.open(args.capture).settings.get("real_size")
+    if real:
+        which, metres = next(iter(real.items()))
+        print(f"in metres: the object's {which} is {metres:g} m as stated; its base is on y = 0")
+    else:
+        print(f"note: the scale is arbitrary (the photos' units); give the real size with "
+              f"`lirm capture --real-size height=METRES {args.capture}` to export in metres")
     return 0
 
 

@@ -69,6 +69,23 @@ def standing_on_the_ground(transform: np.ndarray, vertices: np.ndarray, base_sli
     return moved
 
 
+def in_metres(transform: np.ndarray, vertices: np.ndarray, real_size: dict | None) -> np.ndarray:
+    """`transform` rescaled so that the object's stated height (its extent along up) or width (its
+    largest horizontal extent) comes out in metres; unchanged without a stated size."""
+    if not real_size:
+        return transform
+    placed = vertices @ transform[:3, :3].T + transform[:3, 3]
+    if "height" in real_size:
+        extent, metres = float(np.ptp(placed[:, 2])), float(real_size["height"])
+    else:
+        extent, metres = float(np.ptp(placed[:, :2], axis=0).max()), float(real_size["width"])
+    if extent <= 0:
+        return transform
+    scaled = transform.copy()
+    scaled[:3, :] *= metres / extent
+    return scaled
+
+
 def export_capture(capture_dir: str | Path, out_path: str | Path, config: ExportConfig = ExportConfig(),
                    checkpoint: str | Path | None = None, progress: Progress | None = None,
                    source: ModelSource | None = None, update: int | None = None) -> tuple[ExportResult, ModelSource]:
@@ -81,4 +98,9 @@ def export_capture(capture_dir: str | Path, out_path: str | Path, config: Export
     # name); a refined state holds its own field.
     field = load_field(state_path, source.model)
     transform = export_transform(capture)
-    return export_field(field, out_path, config, lambda vertices: standing_on_the_ground(transform, vertices), progress), source
+    real_size = capture.settings.get("real_size")
+
+    def placement(vertices: np.ndarray) -> np.ndarray:
+        return standing_on_the_ground(in_metres(transform, vertices, real_size), vertices)
+
+    return export_field(field, out_path, config, placement, progress), source

@@ -93,3 +93,15 @@ def test_a_box_redoes_one_views_mask(app, lego_capture, tmp_path):
     assert any(h["action"] == "fix mask" for h in history)
     assert app.fix_mask_with_box(frame, (10, 10, 12, 12)) is None  # too small: says so
     assert "larger box" in app.state.messages[-1].text
+
+
+def test_the_real_height_set_in_the_app_reaches_the_capture(app, lego_capture, tmp_path):
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    assert app.open_capture(capture)
+    assert app.state.real_size is None
+    assert app.set_real_size(0.0) is None  # says what to give instead
+    assert app.set_real_size(0.12) is not None
+    app.jobs.wait()
+    assert json.loads((capture / "capture.json").read_text())["settings"]["real_size"] == {"height": 0.12}
+    assert app.state.real_size == {"height": 0.12}

@@ -57,6 +57,16 @@ def test_export_defaults_to_the_capture_and_carries_the_weights_caveat(lego_capt
     captured = capsys.readouterr()
     assert (capture / "export" / "asset.glb").is_file() and str(capture / "export" / "asset.glb") in captured.out
     assert "about these weights" in captured.err
+    assert "the scale is arbitrary" in captured.out  # no real size given: said plainly (issue 21, case 8)
+
+
+@pytest.mark.parametrize("text", ["height=abc", "depth=0.1", "height=0", "height=5km"])
+def test_a_real_size_that_cannot_be_read_is_a_usage_error(lego_capture, tmp_path, text, capsys):
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    before = (capture / "capture.json").read_bytes()
+    assert main(["capture", "--real-size", text, str(capture)]) == 2
+    assert "--real-size" in capsys.readouterr().err and (capture / "capture.json").read_bytes() == before
 
 
 def test_the_app_and_the_cli_export_on_the_same_grid():

@@ -48,3 +48,21 @@ def test_an_exported_capture_stands_on_y_zero(lego_capture, tmp_path, capsys):
     assert recorded.shape == (4, 4) and np.allclose(recorded[3], (0, 0, 0, 1))
     assert np.array_equal(read_placement(out), recorded)  # what the app draws the cameras and field with
     assert read_placement(tmp_path / "missing.glb") is None
+
+
+def test_a_stated_height_exports_in_metres(lego_capture, tmp_path, capsys):
+    """Issue 21, case 8: `lirm capture --real-size height=9.5cm` and every export is in metres."""
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    assert main(["reconstruct", str(capture), "--updates", "1", "--preset", "tiny", "--novel-views", "1",
+                 "--render-size", "24", "--grid-resolution", "48"]) == 0
+    out = tmp_path / "asset.glb"
+    export = ["export", str(capture), "-o", str(out), "--faces", "800", "--texture", "64", "--grid", "48"]
+    assert main(export) == 0
+    assert "the scale is arbitrary" in capsys.readouterr().out
+    assert main(["capture", "--real-size", "height=9.5cm", str(capture)]) == 0
+    assert main(export) == 0
+    assert "in metres: the object's height is 0.095 m" in capsys.readouterr().out
+    position = (g := _gltf(out))["accessors"][g["meshes"][0]["primitives"][0]["attributes"]["POSITION"]]
+    assert abs(position["max"][1] - position["min"][1] - 0.095) < 1e-6 and abs(position["min"][1]) < 1e-6
+    assert main(["capture", "--real-size", "tall", str(capture)]) == 2
