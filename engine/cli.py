@@ -165,7 +165,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     render = sub.add_parser("render", help="render an asset from an orbit of cameras: beauty + G-buffer PNGs + transforms.json")
     render.add_argument("asset", nargs="?", help="a .gltf/.glb/.obj file or a built-in object name (see --list)")
-    render.add_argument("--env", default="studio", help="built-in environment (studio, sky, overcast) or an .hdr/.exr path")
+    render.add_argument("--env", default="studio", help="built-in environment (studio, sky, overcast), an .hdr/.exr path, or a capture folder (the lighting its photos were taken in)")
     render.add_argument("--views", type=int, default=8, help="number of orbit views (default 8)")
     render.add_argument("--size", type=_size, default=(512, 512), help="image size WxH (default 512x512)")
     render.add_argument("-o", "--out", type=Path, help="output folder (required)")
@@ -380,6 +380,11 @@ def build_parser() -> argparse.ArgumentParser:
                          "(from the earlier refinement) for 1/4, 1/2 and all of it")
     bf.add_argument("--json", type=Path, help="also write every object's numbers here")
     bf.set_defaults(run=_run_bench_refine)
+
+    bl = bench_sub.add_parser("lighting", help="the capture lighting estimated from the demo shoot's photos against the environment that lit them")
+    bl.add_argument("demo_out", type=Path, help="a `lirm demo` output folder (its capture/ and truth/)")
+    bl.add_argument("--env", help="the true environment (default: the one truth/transforms.json names)")
+    bl.set_defaults(run=_run_bench_lighting)
 
     bu = bench_sub.add_parser("update-order", help="update sets in walk-around order or spread over the object: LIRM and the carved hull after updates 1-3")
     bu.add_argument("checkpoint", type=Path, nargs="?", help="model weights (default: the shipped checkpoint)")
@@ -1211,6 +1216,15 @@ def _run_bench_refine(args: argparse.Namespace) -> int:
     print(table)
     if args.json:
         atomic_write(args.json, lambda tmp: tmp.write_text(dumps(result), encoding="utf-8"))
+    return 0
+
+
+def _run_bench_lighting(args: argparse.Namespace) -> int:
+    from .bench.lighting_bench import run_lighting_bench
+
+    if not (args.demo_out / "capture" / "capture.json").is_file() or not (args.demo_out / "truth" / "transforms.json").is_file():
+        raise LirmUserError(f"{args.demo_out}: not a `lirm demo` output (it needs capture/ and truth/); run `lirm demo -o {args.demo_out}` first")
+    print(run_lighting_bench(args.demo_out, args.env).report())
     return 0
 
 

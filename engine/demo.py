@@ -84,6 +84,8 @@ def run_demo(out_dir: str | Path, config: DemoConfig = DemoConfig(), progress: C
         write_png(truth / "masks" / f"shot_{frame_id}.png", shoot.masks[frame_id])
     atomic_write_json(truth / "transforms.json", {
         "camera_model": "OPENCV",
+        "environment": config.shoot_environment,  # what lit the shoot: `lirm bench lighting` compares with it
+        "environment_width": config.environment_width,
         "frames": [{"file_path": f"../photos/shot_{k}.jpg", **cam.to_dict()} for k, cam in sorted(shoot.cameras.items())],
     })
 

@@ -1,7 +1,7 @@
 """HDR environment files (.hdr Radiance RGBE, .exr OpenEXR) and the built-in procedural ones.
 
-`resolve_environment("studio")` or `resolve_environment("~/hdris/venice_sunset_1k.hdr")` is the one
-entry point the command line and the app use; `load_environment_file` reads a file only.
+`resolve_environment("studio")`, `resolve_environment("~/hdris/venice_sunset_1k.hdr")` or
+`resolve_environment(CAPTURE_FOLDER)` (the lighting its photos were taken in) is the one entry point the command line and the app use; `load_environment_file` reads a file only.
 
 Every failure is an `EnvironmentLoadError` whose message names the file and says what to do.
 Non-finite or negative texels do not fail the load: they are repaired (NaN -> 0, +Inf -> the
@@ -55,12 +55,28 @@ def resolve_environment(name_or_path: str | Path, width: int = 1024) -> Environm
     if isinstance(name_or_path, str) and name_or_path.strip().lower() in PROCEDURAL_ENVIRONMENTS:
         return make_procedural_environment(name_or_path.strip().lower(), width=width)
     path = Path(name_or_path).expanduser()
+    if path.is_dir() and (path / "capture.json").is_file():
+        return _capture_lighting(path)
     if not path.exists():
         raise EnvironmentLoadError(
             f"environment {str(name_or_path)!r} is neither a built-in name nor an existing file: "
             f"{_WHAT_TO_PASS}, {_BUILTIN_HINT}"
         )
     return load_environment_file(path)
+
+
+def _capture_lighting(capture: Path) -> Environment:
+    """A capture folder stands for the lighting its photos were taken in ("as photographed")."""
+    from lirm.engine.lighting.capture_lighting import ENVIRONMENT_NAME, LIGHTING_FOLDER, PANORAMA_FILE
+
+    path = capture / LIGHTING_FOLDER / PANORAMA_FILE
+    if not path.is_file():
+        raise EnvironmentLoadError(
+            f"{capture}: this capture has no lighting estimate yet ({path} is missing); "
+            f"`lirm capture --resume {capture}` estimates it from the photos' backgrounds")
+    environment = load_environment_file(path)
+    environment.name = ENVIRONMENT_NAME
+    return environment
 
 
 def load_environment_file(path: str | Path) -> Environment:

@@ -22,6 +22,7 @@ from .auto_mask import AutoMaskConfig, automatic_masks
 from .capture_folder import Capture, FrameState
 from .colmap_posing import ColmapConfig, extend_colmap_pose, pose_with_colmap
 from .crop import CropConfig, EmptyMaskError, prepare_view
+from ..lighting.capture_lighting import CaptureLightingConfig, estimate_capture_lighting
 from .disk_space import require_free_space, stage_bytes
 from .ingest import Cancelled, IngestConfig, ingest_photos, natural_key
 from .masks import check_mask, cut_by_border, load_user_masks, mask_from_alpha, propagate_mask_fix
@@ -33,7 +34,8 @@ from .video_frames import VideoConfig, select_video_frames
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".webm", ".m4v")
 STAGES = ("ingest", "pose", "normalize", "masks", "crops")
-STAGE_WORDS = {"pose": "pose the photos (COLMAP)", "masks": "write the masks", "crops": "prepare the network's crops"}
+STAGE_WORDS = {"pose": "pose the photos (COLMAP)", "masks": "write the masks", "crops": "prepare the network's crops",
+               "lighting": "estimate the lighting the photos were taken in"}
 
 Progress = Callable[[str, int, int], None]  # (stage, done, total)
 
@@ -46,6 +48,7 @@ class CaptureConfig:
     normalize: NormalizeConfig = field(default_factory=NormalizeConfig)
     auto_mask: AutoMaskConfig = field(default_factory=AutoMaskConfig)
     crop: CropConfig = field(default_factory=CropConfig)
+    lighting: CaptureLightingConfig = field(default_factory=CaptureLightingConfig)
     masks: str = "auto"  # auto (alpha where every image has it, else automatic) | alpha | automatic | a folder
     poses: str | None = None  # a transforms.json or COLMAP model folder to use instead of structure from motion
 
@@ -218,7 +221,8 @@ def _finish(capture: Capture, config: CaptureConfig, progress, cancel, new_frame
         return _summary(capture)
     for stage, run in (("normalize", lambda: _normalize(capture, config)),
                        ("masks", lambda: _masks(capture, config, progress, cancel)),
-                       ("crops", lambda: _crops(capture, config, progress, cancel))):
+                       ("crops", lambda: _crops(capture, config, progress, cancel)),
+                       ("lighting", lambda: _lighting(capture, config, cancel))):
         if stage not in capture.settings.get("completed", []) or new_frames:
             _timed(capture, config, stage, run)
     return _summary(capture)
@@ -365,6 +369,29 @@ def _crops(capture: Capture, config: CaptureConfig, progress, cancel) -> None:
         if progress:
             progress("crops", done, len(posed))
     capture.log("crops", prepared=done, size=config.crop.size)
+    capture.save()
+
+
+def _lighting(capture: Capture, config: CaptureConfig, cancel) -> None:
+    """The environment the photos were taken in, from their backgrounds (engine/lighting/). A capture
+    whose photos show no background (cut-outs) simply has none: that is said, not an error."""
+    frames = [f for f in sorted(capture.cameras) if capture.frames[f].mask_status == "ok"]
+    images, masks = {}, {}
+    for f in frames:
+        mask = capture.read_mask(f)
+        if mask is not None:
+            images[f], masks[f] = capture.read_image(f), mask
+    try:
+        lighting = estimate_capture_lighting(images, masks, capture.cameras, config.lighting, cancel=cancel)
+    except InterruptedError as error:
+        raise Cancelled(str(error)) from error
+    except ValueError as error:
+        capture.log("lighting", estimated=False, reason=str(error))
+        capture.save()
+        return
+    path = lighting.save(capture.root)
+    capture.log("lighting", estimated=True, file=str(path.relative_to(capture.root)), photos=lighting.photos_used,
+                seen=round(lighting.seen_fraction, 3), clipped=round(lighting.clipped_fraction, 3))
     capture.save()
 
 

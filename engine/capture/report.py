@@ -28,6 +28,7 @@ def format_capture_report(summary: CaptureSummary, reference: Path | None = None
         for frame_id, state in warned:
             lines.append(f"    {state.record.original.name} ({frame_id}): {state.mask_warning}")
     lines.append(f"  network views prepared: {summary.prepared}")
+    lines.append(_lighting_line(capture))
     timings = capture.settings.get("timings", {})
     if summary.nothing_new:
         lines.append("  nothing new was added (every photo was skipped, see above): no stage ran and the capture is unchanged")
@@ -44,6 +45,18 @@ def format_capture_report(summary: CaptureSummary, reference: Path | None = None
     elif summary.registered < summary.accepted:
         lines.append("  the photos that did not register can be retaken or removed; the capture is usable without them")
     return "\n".join(lines)
+
+
+def _lighting_line(capture) -> str:
+    entries = [entry for entry in capture.history if entry.get("action") == "lighting"]
+    if not entries:
+        return "  lighting as photographed: not estimated yet (`lirm capture --resume` estimates it)"
+    last = entries[-1]
+    if not last.get("estimated"):
+        return f"  lighting as photographed: none ({last.get('reason', 'no background')})"
+    return (f"  lighting as photographed: {last['file']} from the backgrounds of {last['photos']} photos; "
+            f"{100 * last['seen']:.0f}% of directions seen (the rest filled smoothly, not measured), "
+            f"{100 * last['clipped']:.0f}% of the seen ones clipped")
 
 
 def _reference_errors(capture, reference: Path) -> str:

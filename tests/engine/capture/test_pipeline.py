@@ -12,9 +12,12 @@ import cv2
 import numpy as np
 import pytest
 
+from lirm.engine.assets.environment_files import resolve_environment
 from lirm.engine.capture.capture_folder import Capture
+from lirm.engine.capture.report import format_capture_report
 from lirm.engine.capture.pipeline import CaptureConfig, resume_capture, run_capture
 from lirm.engine.cli import main
+from lirm.engine.errors import EnvironmentLoadError
 
 
 def _hashes(folder: Path) -> dict[str, str]:
@@ -73,6 +76,7 @@ def test_messy_folder_gives_a_report_and_a_usable_capture(messy_folder, tmp_path
     # Normalised: cameras around the origin, +Z roughly their average up.
     ups = np.mean([c.up for c in capture.cameras.values()], axis=0)
     assert ups[2] / np.linalg.norm(ups) > 0.99
+    assert "lighting as photographed: lighting/as_photographed.hdr" in report and (out / "lighting" / "as_photographed.hdr").is_file()
 
 
 def test_nothing_posable_exits_non_zero(tmp_path, capsys, shared_data):
@@ -115,6 +119,10 @@ def test_imported_poses_and_alpha_masks(tmp_path, shared_data):
     np.testing.assert_allclose(np.linalg.norm(view.plucker[..., :3], axis=-1), 1.0, atol=1e-5)
     # Normalisation put the lego's centre near the origin and its cameras outside radius 1.
     assert all(np.linalg.norm(c.center) > 1.0 for c in capture.cameras.values())
+    # Cut-out renders show no background: no lighting estimate, said in the report, not an error.
+    assert "lighting as photographed: none (no photo shows any background" in format_capture_report(summary)
+    with pytest.raises(EnvironmentLoadError, match="no lighting estimate yet"):
+        resolve_environment(tmp_path / "capture")
 
 
 def test_an_interrupted_capture_resumes(tmp_path, shared_data):
@@ -233,3 +241,8 @@ def test_pipeline_on_a_gltf_photographed_on_a_floor_under_an_hdri(tmp_path, shar
     assert summary.registered == 16
     assert accuracy["rotation_deg_max"] < 1.0 and accuracy["center_error_max"] < 0.01
     assert accuracy["mask_iou_mean"] >= 0.9, accuracy
+    # The lighting the photos were taken in, from their backgrounds, usable wherever an HDRI is.
+    lighting = resolve_environment(tmp_path / "capture")
+    assert lighting.name == "as photographed" and lighting.radiance.shape == (64, 128, 3)
+    assert (tmp_path / "capture" / "lighting" / "as_photographed.png").is_file()
+    assert "lighting as photographed: lighting/as_photographed.hdr from the backgrounds of 16 photos" in format_capture_report(summary)

@@ -1,0 +1,58 @@
+"""How close an estimated environment is to the true one: where its brightest light is, and how
+much light it sends onto an upward-facing plane (issue 19's two figures)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from lirm.renderer.environment import Environment
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+def brightest_direction(environment: Environment, fraction: float = 0.01, to_frame: np.ndarray | None = None) -> np.ndarray:
+    """Unit mean direction of the brightest `fraction` of the sphere (by solid angle), weighted by
+    luminance x solid angle. `to_frame` (3x3) rotates the environment's directions first."""
+    dirs, solid_angle = environment.texel_directions()
+    dirs, solid_angle = dirs.reshape(-1, 3), solid_angle.ravel()
+    if to_frame is not None:
+        dirs = dirs @ np.asarray(to_frame).T
+    luminance = environment.radiance.reshape(-1, 3) @ LUMINANCE
+    order = np.argsort(-luminance)
+    cumulative = np.cumsum(solid_angle[order])
+    top = order[: int(np.searchsorted(cumulative, fraction * 4.0 * np.pi)) + 1]
+    mean = (dirs[top] * (luminance[top] * solid_angle[top])[:, None]).sum(0)
+    return mean / max(np.linalg.norm(mean), 1e-12)
+
+
+def up_irradiance(environment: Environment, to_frame: np.ndarray | None = None, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """RGB irradiance on a plane facing `up`: the integral of L cos(theta) over its hemisphere."""
+    dirs, solid_angle = environment.texel_directions()
+    dirs = dirs.reshape(-1, 3)
+    if to_frame is not None:
+        dirs = dirs @ np.asarray(to_frame).T
+    cosine = np.clip(dirs @ np.asarray(up, dtype=np.float64), 0.0, None)
+    return (environment.radiance.reshape(-1, 3) * (cosine * solid_angle.ravel())[:, None]).sum(0)
+
+
+@dataclass
+class LightingAccuracy:
+    brightest_angle_deg: float  # between the brightest 1%'s mean directions
+    up_irradiance_ratio: float  # estimated / true, luminance
+    estimated_up_irradiance: np.ndarray
+    true_up_irradiance: np.ndarray
+
+    def meets_goal(self, angle_deg: float = 20.0, irradiance_tolerance: float = 0.25) -> bool:
+        return self.brightest_angle_deg <= angle_deg and abs(self.up_irradiance_ratio - 1.0) <= irradiance_tolerance
+
+
+def compare_lighting(estimate: Environment, truth: Environment, estimate_to_truth: np.ndarray) -> LightingAccuracy:
+    """`estimate_to_truth` (3x3) rotates the estimate's world frame into the truth's."""
+    a = brightest_direction(estimate, to_frame=estimate_to_truth)
+    b = brightest_direction(truth)
+    angle = float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))
+    e_est = up_irradiance(estimate, to_frame=estimate_to_truth)
+    e_true = up_irradiance(truth)
+    return LightingAccuracy(angle, float((e_est @ LUMINANCE) / max(e_true @ LUMINANCE, 1e-12)), e_est, e_true)

@@ -1,0 +1,38 @@
+"""From a photo's display values back to scene radiance: the camera's tone curve, inverted.
+
+A photo is display-referred sRGB (DESIGN.md §3), and a camera's JPEG engine also compresses
+highlights with a filmic S-curve that a plain sRGB decode leaves in. With no way to calibrate a
+user's camera from a handful of photos, the product models every camera with its own display
+transform (renderer/tonemap.py: ACES fit, then sRGB): the inverse of what the viewport shows. Then an
+asset lit "as photographed" and shown in the viewport reproduces the photos' tones, and the
+synthetic shoots (rendered through that transform) invert exactly. "srgb" is the plain decode, for
+photos known to be linear before their sRGB encoding.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lirm.renderer.tonemap import ACES_INPUT, ACES_OUTPUT, srgb_to_linear
+
+RESPONSES = ("aces", "srgb")
+# The ACES fit's rational curve reaches 1 / 0.983729 only at infinite radiance; display values are
+# capped just below 1 (a clipped pixel), which inverts to a finite radiance: the lower bound of
+# what the pixel saw.
+_CURVE_CAP = 0.999 / 0.983729
+
+
+def display_to_radiance(display: np.ndarray, response: str = "aces") -> np.ndarray:
+    """(..., 3) display sRGB in [0, 1] -> linear scene radiance (exposure 0)."""
+    if response not in RESPONSES:
+        raise ValueError(f"unknown camera response {response!r}; choose one of {', '.join(RESPONSES)}")
+    linear = srgb_to_linear(np.clip(display, 0.0, 1.0))
+    if response == "srgb":
+        return linear
+    y = np.clip(linear @ np.linalg.inv(ACES_OUTPUT).T, 0.0, _CURVE_CAP)
+    # Solve v (v + 0.0245786) - 0.000090537 = y (0.983729 v^2 + 0.4329510 v + 0.238081) for v >= 0.
+    a = 1.0 - 0.983729 * y
+    b = 0.0245786 - 0.4329510 * y
+    c = -(0.000090537 + 0.238081 * y)
+    v = (-b + np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))) / (2.0 * a)
+    return np.maximum(v @ np.linalg.inv(ACES_INPUT).T, 0.0)

@@ -1,0 +1,218 @@
+"""The environment a capture was photographed in, estimated from its own photos' backgrounds.
+
+Every posed photo's pixels outside the object's mask are rays that saw the surroundings. Each is
+followed to a proxy sphere around the object (radius: `proxy_radius` x the cameras' median distance),
+and the direction from the object's centre to where it lands gets the pixel's radiance (the camera's
+tone curve inverted, camera_response.py). Near surroundings (the table under the object) are placed
+roughly where the object sees them, far ones exactly; averaging over all photos gives a panorama in
+the capture's world frame (+Z up, the renderer's environment frame with rotation 0).
+
+What the photos did not see (usually the sky or ceiling above them, whence most light comes) is
+filled smoothly from what they did see (push-pull over a pyramid), and marked as unseen in
+`observed`; the refinement's inverse rendering is where the object's own shading can say more.
+LDR clipping is explicit: a pixel at the top of the 8-bit range is a lower bound of the radiance it
+saw, and `clipped` holds the share of such pixels per direction, so a bright source is not mistaken
+for a dim grey one without saying so.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from lirm.renderer.environment import Environment, direction_to_equirect_uv
+from lirm.renderer.tonemap import tonemap
+
+from ..io.atomic_files import atomic_write, atomic_write_json
+from ..io.images import write_png
+from .camera_response import display_to_radiance
+
+LIGHTING_FOLDER = "lighting"
+PANORAMA_FILE = "as_photographed.hdr"
+PICTURE_FILE = "as_photographed.png"
+INFO_FILE = "lighting.json"
+ENVIRONMENT_NAME = "as photographed"
+
+
+@dataclass(frozen=True)
+class CaptureLightingConfig:
+    width: int = 128  # panorama width; height = width / 2 (2.8 degree texels: lighting, not a backdrop)
+    proxy_radius: float = 2.0  # times the cameras' median distance from the object
+    mask_margin_px: int = 4  # background pixels this close to the object are left out (its blurred edge)
+    clip_level: float = 250.0 / 255.0  # a display value at or above this in any channel is clipped
+    response: str = "aces"  # camera_response.RESPONSES
+    pixels_per_photo: int = 60_000  # a regular subsample of each photo's background
+
+    def __post_init__(self) -> None:
+        if self.width < 16 or self.width % 2:
+            raise ValueError("the lighting panorama needs an even width of at least 16")
+        if self.proxy_radius <= 1.0:
+            raise ValueError("proxy_radius must be more than 1 (the sphere must enclose the cameras)")
+
+
+@dataclass
+class CaptureLighting:
+    environment: Environment  # the filled panorama, linear radiance
+    observed: np.ndarray  # (H, W) photo pixels that landed in each texel (0: filled, not seen)
+    clipped: np.ndarray  # (H, W) share of those that were clipped (a lower bound of the radiance there)
+    photos_used: int
+    config: CaptureLightingConfig
+
+    @property
+    def seen_fraction(self) -> float:
+        """Share of the sphere's solid angle that some photo saw."""
+        _, solid_angle = self.environment.texel_directions()
+        return float(solid_angle[self.observed > 0].sum() / solid_angle.sum())
+
+    @property
+    def clipped_fraction(self) -> float:
+        _, solid_angle = self.environment.texel_directions()
+        seen = self.observed > 0
+        return float((solid_angle * self.clipped)[seen].sum() / max(solid_angle[seen].sum(), 1e-12))
+
+    def save(self, capture_root: str | Path) -> Path:
+        folder = Path(capture_root) / LIGHTING_FOLDER
+        folder.mkdir(parents=True, exist_ok=True)
+        bgr = np.ascontiguousarray(self.environment.radiance[:, :, ::-1], dtype=np.float32)
+        ok, encoded = cv2.imencode(".hdr", bgr)
+        if not ok:
+            raise OSError(f"{folder / PANORAMA_FILE}: OpenCV could not encode the panorama")
+        atomic_write(folder / PANORAMA_FILE, lambda tmp: tmp.write_bytes(encoded.tobytes()))
+        write_png(folder / PICTURE_FILE, lighting_picture(self))
+        atomic_write_json(folder / INFO_FILE, {
+            "photos_used": self.photos_used, "seen_fraction": round(self.seen_fraction, 4),
+            "clipped_fraction_of_seen": round(self.clipped_fraction, 4), "config": asdict(self.config),
+            "note": "directions no photo saw are filled smoothly from those they did (not measured)",
+        })
+        return folder / PANORAMA_FILE
+
+
+def lighting_picture(lighting: CaptureLighting, scale: int = 4) -> np.ndarray:
+    """The panorama tone-mapped (exposed for its seen part), with unseen directions hatched and
+    clipped ones outlined in red, as uint8 RGB."""
+    radiance = lighting.environment.radiance
+    seen = lighting.observed > 0
+    key = np.percentile(radiance[seen].mean(-1), 50) if seen.any() else max(float(radiance.mean()), 1e-6)
+    picture = tonemap(radiance * (0.18 / max(key, 1e-6)))
+    h, w = seen.shape
+    big = cv2.resize((picture * 255).astype(np.uint8), (w * scale, h * scale), interpolation=cv2.INTER_NEAREST)
+    unseen = cv2.resize((~seen).astype(np.uint8), (w * scale, h * scale), interpolation=cv2.INTER_NEAREST) > 0
+    yy, xx = np.mgrid[0:h * scale, 0:w * scale]
+    hatch = unseen & (((xx + yy) // 3) % 4 == 0)
+    big[hatch] = (big[hatch] * 0.4 + 255 * 0.6).astype(np.uint8)
+    clipped = cv2.resize((lighting.clipped > 0.5).astype(np.uint8), (w * scale, h * scale), interpolation=cv2.INTER_NEAREST)
+    edges = cv2.morphologyEx(clipped, cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8)) > 0
+    big[edges] = (230, 40, 40)
+    return big
+
+
+def estimate_capture_lighting(images: dict, masks: dict, cameras: dict, config: CaptureLightingConfig = CaptureLightingConfig(),
+                              cancel=None) -> CaptureLighting:
+    """`images` frame -> RGB(A) uint8 working image, `masks` frame -> uint8 (255 = object), `cameras`
+    frame -> Camera in the normalised world (object at the origin)."""
+    frames = [f for f in sorted(cameras) if f in images and f in masks]
+    if not frames:
+        raise ValueError("no posed photo with a mask to estimate the lighting from")
+    distance = float(np.median([np.linalg.norm(cameras[f].center) for f in frames]))
+    radius = config.proxy_radius * distance
+    h, w = config.width // 2, config.width
+    total = np.zeros((h * w, 3))
+    count = np.zeros(h * w)
+    clipped = np.zeros(h * w)
+    used = 0
+    for f in frames:
+        if cancel is not None and cancel():
+            raise InterruptedError("cancelled while estimating the capture lighting")
+        rgb, background = _background_pixels(images[f], masks[f], config)
+        if not background.any():
+            continue
+        ys, xs = np.nonzero(background)
+        step = max(1, int(np.ceil(len(ys) / config.pixels_per_photo)))
+        ys, xs = ys[::step], xs[::step]
+        display = rgb[ys, xs].astype(np.float64) / 255.0
+        origins, directions = cameras[f].rays_at(np.stack([xs + 0.5, ys + 0.5], -1))
+        landing = origins + directions * _distance_to_sphere(origins, directions, radius)[:, None]
+        u, v = direction_to_equirect_uv(landing)
+        texel = np.minimum((v * h).astype(np.int64), h - 1) * w + np.minimum((u * w).astype(np.int64), w - 1)
+        total += np.stack([np.bincount(texel, display_to_radiance(display, config.response)[:, c], h * w) for c in range(3)], 1)
+        count += np.bincount(texel, minlength=h * w)
+        clipped += np.bincount(texel, (display >= config.clip_level).any(1).astype(np.float64), h * w)
+        used += 1
+    if used == 0:
+        raise ValueError("no photo shows any background (all masked or transparent): the lighting cannot be estimated")
+    mean = total / np.maximum(count, 1)[:, None]
+    observed = count.reshape(h, w)
+    filled = push_pull_fill(mean.reshape(h, w, 3), observed > 0)
+    environment = Environment(filled.astype(np.float32), name=ENVIRONMENT_NAME)
+    share = (clipped / np.maximum(count, 1)).reshape(h, w)
+    return CaptureLighting(environment, observed, share, used, config)
+
+
+def _background_pixels(image: np.ndarray, mask: np.ndarray, config: CaptureLightingConfig) -> tuple[np.ndarray, np.ndarray]:
+    rgb = image[:, :, :3]
+    grown = cv2.dilate((mask > 127).astype(np.uint8), np.ones((2 * config.mask_margin_px + 1,) * 2, np.uint8)) > 0
+    background = ~grown
+    if image.shape[2] == 4:  # transparent pixels saw nothing (a cut-out render or a pre-masked photo)
+        background &= image[:, :, 3] == 255
+    return rgb, background
+
+
+def _distance_to_sphere(origins: np.ndarray, directions: np.ndarray, radius: float) -> np.ndarray:
+    """Distance along each ray (from inside the sphere) to where it leaves it."""
+    b = np.sum(origins * directions, axis=1)
+    c = np.sum(origins * origins, axis=1) - radius * radius
+    return -b + np.sqrt(np.maximum(b * b - c, 0.0))
+
+
+def push_pull_fill(values: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """Fill unknown texels of an equirectangular (H, W, C) image smoothly from the known ones.
+
+    Pull: average known texels into ever coarser levels (wrapping in longitude); push: each unknown
+    texel takes the next coarser level's value, upsampled bilinearly, so holes fill from their
+    surroundings at the scale of the hole. Known texels are kept as they are.
+    """
+    if known.all():
+        return values.copy()
+    if not known.any():
+        raise ValueError("nothing to fill from")
+    levels = [(values * known[..., None], known.astype(np.float64))]
+    while min(levels[-1][1].shape) > 2:
+        v, k = levels[-1]
+        hh, ww = v.shape[0] // 2 * 2, v.shape[1] // 2 * 2
+        v, k = v[:hh, :ww], k[:hh, :ww]
+        sv = v.reshape(hh // 2, 2, ww // 2, 2, -1).sum(axis=(1, 3))
+        sk = k.reshape(hh // 2, 2, ww // 2, 2).sum(axis=(1, 3))
+        levels.append((sv, sk))
+    # Coarsest level: the mean of what is known fills whatever is still empty.
+    v, k = levels[-1]
+    grand = levels[0][0].reshape(-1, values.shape[-1]).sum(0) / levels[0][1].sum()
+    estimate = np.where(k[..., None] > 0, v / np.maximum(k, 1e-12)[..., None], grand)
+    for v, k in reversed(levels[:-1]):
+        up = _upsample_wrapped(estimate, v.shape[:2])
+        mean = v / np.maximum(k, 1e-12)[..., None]
+        weight = np.clip(k, 0.0, 1.0)[..., None]  # a level's texel is trusted once it averages one known texel
+        estimate = weight * mean + (1.0 - weight) * up
+    return np.where(known[..., None], values, estimate)
+
+
+def _upsample_wrapped(image: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    pad = np.concatenate([image[:, -1:], image, image[:, :1]], axis=1)
+    big = cv2.resize(pad.astype(np.float32), ((image.shape[1] + 2) * 2, image.shape[0] * 2), interpolation=cv2.INTER_LINEAR)
+    big = big[:, 2:-2]
+    out = np.zeros(shape + (image.shape[-1],), np.float64)
+    hh, ww = min(shape[0], big.shape[0]), min(shape[1], big.shape[1])
+    out[:hh, :ww] = big[:hh, :ww].reshape(hh, ww, -1)
+    if hh < shape[0]:
+        out[hh:, :ww] = out[hh - 1:hh, :ww]
+    if ww < shape[1]:
+        out[:, ww:] = out[:, ww - 1:ww]
+    return out
+
+
+def load_capture_lighting_info(capture_root: str | Path) -> dict | None:
+    path = Path(capture_root) / LIGHTING_FOLDER / INFO_FILE
+    return json.loads(path.read_text()) if path.is_file() else None
