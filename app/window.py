@@ -303,6 +303,21 @@ class LirmApp:
         self._textures[key] = (stamp, texture)
         return texture
 
+    def picture_texture(self, path: Path):
+        """A PNG on disk as a texture, cached until the file changes."""
+        import cv2
+
+        path = Path(path)
+        if not path.is_file():
+            return None
+
+        def make():
+            image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+            if image is None:
+                return None
+            return np.dstack([cv2.cvtColor(image, cv2.COLOR_BGR2RGB), np.full(image.shape[:2], 255, np.uint8)])
+        return self._cached_texture(("picture", str(path)), path.stat().st_mtime, make)
+
     def thumbnail_texture(self, frame_id: str, size: int = 48):
         """The view's network crop (masked image) as a small texture, cached until the crop changes."""
         import cv2

@@ -1,10 +1,17 @@
-"""Lighting: the built-in environments and the user's HDRIs, rotation, exposure, background."""
+"""Lighting: the capture's own lighting ("as photographed", estimated from its photos' backgrounds),
+the built-in environments and the user's HDRIs, rotation, exposure, background."""
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 from imgui_bundle import imgui
 
+from lirm.engine.lighting.capture_lighting import INFO_FILE, LIGHTING_FOLDER, PANORAMA_FILE, PICTURE_FILE
 from lirm.renderer.procedural_environments import PROCEDURAL_ENVIRONMENTS
+
+AS_PHOTOGRAPHED = "as photographed"
 
 
 class LightingPanel:
@@ -17,12 +24,20 @@ class LightingPanel:
     def draw(self) -> None:
         state, actions = self.app.state, self.app.actions
         view = state.choices.view
-        choices = list(PROCEDURAL_ENVIRONMENTS) + [p for p in self.app.user_environments if p not in PROCEDURAL_ENVIRONMENTS]
-        if imgui.begin_combo("environment", view.environment.split("/")[-1]):
+        photographed = self.as_photographed_path()
+        own = [str(photographed)] if photographed else []
+        choices = own + list(PROCEDURAL_ENVIRONMENTS) + [p for p in self.app.user_environments if p not in PROCEDURAL_ENVIRONMENTS and p not in own]
+
+        def label(name: str) -> str:
+            return AS_PHOTOGRAPHED if name in own else name.split("/")[-1]
+
+        if imgui.begin_combo("environment", label(view.environment)):
             for name in choices:
-                if imgui.selectable(name.split("/")[-1], name == view.environment)[0]:
+                if imgui.selectable(label(name), name == view.environment)[0]:
                     actions.set_environment(name)
             imgui.end_combo()
+        if view.environment in own:
+            self._draw_panorama(photographed.parent)
         imgui.set_next_item_width(-110)
         _, self.hdri_path = imgui.input_text("##hdri", self.hdri_path)
         imgui.same_line()
@@ -37,3 +52,23 @@ class LightingPanel:
         changed, background = imgui.checkbox("show the environment behind", view.background)
         if changed:
             actions.set_background(background)
+
+    def as_photographed_path(self) -> Path | None:
+        """The open capture's lighting estimate, when it has one."""
+        capture = self.app.state.capture_dir
+        path = None if capture is None else Path(capture) / LIGHTING_FOLDER / PANORAMA_FILE
+        return path.resolve() if path is not None and path.is_file() else None
+
+    def _draw_panorama(self, folder: Path) -> None:
+        texture = self.app.picture_texture(folder / PICTURE_FILE)
+        if texture is not None:
+            width = imgui.get_content_region_avail().x
+            imgui.image(imgui.ImTextureRef(texture.glo), imgui.ImVec2(width, width / 2))
+        try:
+            info = json.loads((folder / INFO_FILE).read_text())
+        except (OSError, ValueError):
+            info = {}
+        seen = info.get("seen_fraction")
+        imgui.text_wrapped(f"estimated from the backgrounds of {info.get('photos_used', '?')} photos; "
+                           + (f"{100 * seen:.0f}% of directions seen, " if seen is not None else "")
+                           + "the hatched rest is filled smoothly, not measured")

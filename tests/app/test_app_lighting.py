@@ -1,0 +1,59 @@
+""""As photographed" in the window (issue 19): a capture's own lighting estimate is offered first in
+the Lighting panel, lights the viewport when picked, and the panel shows the estimated panorama.
+The screenshots are left in the test's folder (out/) to look at."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+from lirm.engine.lighting.capture_lighting import CaptureLighting, CaptureLightingConfig
+from lirm.renderer.procedural_environments import make_procedural_environment
+
+pytestmark = [pytest.mark.display, pytest.mark.slow]
+
+
+def _estimate_into(capture) -> str:
+    """A lighting estimate as the capture stage writes it: the sky, its upper half unseen."""
+    environment = make_procedural_environment("sky", width=128)
+    observed = np.zeros((64, 128))
+    observed[32:] = 5
+    CaptureLighting(environment, observed, np.zeros((64, 128)), 8, CaptureLightingConfig()).save(capture)
+    return str((capture / "lighting" / "as_photographed.hdr").resolve())
+
+
+def test_the_capture_lighting_is_offered_and_lights_the_viewport(lego_capture, tmp_path, x_display):
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    panorama = _estimate_into(capture)
+    views = sorted(p.stem for p in (capture / "prepared").glob("*.npz"))
+    script = {"out": str(tmp_path / "out"), "steps": [
+        {"frames": 2}, {"action": "open_capture", "args": [str(capture)]},
+        {"action": "select_views", "args": [views[:4]]}, {"action": "run_update"}, {"wait": "jobs"},
+        {"action": "set_environment", "args": ["studio"]}, {"frames": 3}, {"screenshot": "studio"},
+        {"action": "set_environment", "args": [panorama]}, {"frames": 3}, {"screenshot": "as_photographed"},
+        {"report_widgets": True}, {"quit": True}]}
+    (tmp_path / "script.json").write_text(json.dumps(script))
+    env = dict(os.environ, DISPLAY=x_display, XDG_CONFIG_HOME=str(tmp_path / "config"))
+    proc = subprocess.run([sys.executable, "-m", "lirm.engine.cli", "app", "--new", "--script", str(tmp_path / "script.json")],
+                          env=env, cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    result = json.loads((tmp_path / "out" / "script_result.json").read_text())
+    assert result["errors"] == [], result["errors"]
+    assert result["viewport"]["environment_lit"] == panorama
+    assert not [m for m in result["messages"] if m["level"] == "error"], result["messages"]
+    x0, y0, x1, y1 = (int(round(v)) for v in result["widgets"]["viewport"])
+    studio, photographed = (cv2.imread(result["screenshots"][name])[y0 + 2:y1 - 2, x0 + 2:x1 - 2].astype(int)
+                            for name in ("studio", "as_photographed"))
+    assert np.abs(studio - photographed).mean() > 5  # the viewport is lit (and backed) by the estimate now
+    # The Lighting panel (right of the viewport) shows the estimated panorama only for "as photographed".
+    before, after = (cv2.imread(result["screenshots"][name])[:, x1 + 4:].astype(int) for name in ("studio", "as_photographed"))
+    changed = np.abs(before - after).max(axis=-1) > 30
+    assert changed.sum() > 20_000, changed.sum()  # a panorama of about 230 x 115 pixels appeared
