@@ -176,6 +176,10 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--supersample", type=int, default=2, choices=[1, 2, 3, 4], help="anti-aliasing factor (default 2)")
     render.add_argument("--no-background", action="store_true", help="transparent background (RGBA beauty)")
     render.add_argument("--keep-scale", action="store_true", help="do not fit the asset into the unit sphere")
+    render.add_argument("--cameras", type=Path, metavar="TRANSFORMS_JSON",
+                        help="render from exactly these cameras (a transforms.json, e.g. one this command wrote) with the "
+                             "asset in its own frame (not refitted), so that an original and its reconstruction compare "
+                             "view for view; --views, --size, --elevation and --fov are then unused")
     render.add_argument("--ibl", default="default", choices=["default", "preview", "high"],
                         help="environment filtering quality: preview is faster on a CPU, high is finer on a GPU")
     render.add_argument("--list", action="store_true", help="list the built-in objects and environments and exit")
@@ -590,13 +594,28 @@ def _run_render(args: argparse.Namespace) -> int:
     _check_output(args.out, "the output folder (-o)", folder=True)
     model = resolve_asset(args.asset)
     environment = resolve_environment(args.env)
+    cameras = None
+    if args.cameras is not None:
+        from .orbit_render import cameras_from_transforms
+
+        from dataclasses import replace
+
+        from .orbit_render import MAX_RENDER_SIDE
+
+        cameras = cameras_from_transforms(args.cameras)
+        largest = max(max(c.width, c.height) for c in cameras) * args.supersample
+        if largest > MAX_RENDER_SIDE:
+            raise LirmUsageError(f"{args.cameras}: its cameras render {largest} pixels a side with supersample "
+                                 f"{args.supersample}, more than {MAX_RENDER_SIDE}: lower --supersample")
+        config = replace(config, views=len(cameras), normalize=False)
     from lirm.renderer.ibl import IBL_PRESETS
 
     ctx = create_headless_context()
     renderer = PBRRenderer(ctx, IBL_PRESETS[args.ibl])
     try:
         with _progress_bar(config.views, "rendering") as bar:
-            result = render_orbit(renderer, model, environment, config, args.out, progress=lambda done, total: bar.update(1))
+            result = render_orbit(renderer, model, environment, config, args.out, progress=lambda done, total: bar.update(1),
+                                  cameras=cameras)
     finally:
         renderer.release()
         ctx.release()

@@ -97,17 +97,22 @@ def render_orbit(
     config: OrbitRenderConfig,
     out_dir: str | Path,
     progress: Callable[[int, int], None] | None = None,
+    cameras: list[Camera] | None = None,
 ) -> OrbitRenderResult:
+    """Render from an orbit of `config.views` cameras around the (normalised) asset, or, when
+    `cameras` are given (`lirm render --cameras`), from exactly those cameras with the asset kept in
+    its own frame: an original and its reconstruction then render from the same cameras."""
     out_dir = Path(out_dir)
-    transform = normalizing_transform(model.bounds) if config.normalize else np.eye(4)
+    transform = normalizing_transform(model.bounds) if config.normalize and cameras is None else np.eye(4)
     scene = renderer.upload(model.meshes, transform)
     lighting = renderer.prepare_lighting(environment, rotation_deg=config.environment_rotation_deg)
     settings = RenderSettings(exposure_ev=config.exposure_ev, show_environment=config.background, supersample=config.supersample)
-    radius = 1.0 if config.normalize else float(np.linalg.norm(scene.bounds[1] - scene.bounds[0])) / 2.0
-    cameras = orbit_for(config, radius)
-    if not config.normalize:  # orbit around the asset's own centre
-        center = scene.bounds.mean(axis=0)
-        cameras = [c.with_pose(_translated(c.c2w, center)) for c in cameras]
+    if cameras is None:
+        radius = 1.0 if config.normalize else float(np.linalg.norm(scene.bounds[1] - scene.bounds[0])) / 2.0
+        cameras = orbit_for(config, radius)
+        if not config.normalize:  # orbit around the asset's own centre
+            center = scene.bounds.mean(axis=0)
+            cameras = [c.with_pose(_translated(c.c2w, center)) for c in cameras]
     result = OrbitRenderResult(out_dir, cameras, {name: [] for name in CHANNELS})
     frames = []
     try:
@@ -139,6 +144,32 @@ def render_orbit(
         },
     })
     return result
+
+
+def cameras_from_transforms(path: str | Path) -> list[Camera]:
+    """Every frame's camera of a nerfstudio / NeRF transforms.json, in file order (intrinsics from
+    the frame or the top level; w and h are needed: the image size to render)."""
+    import json
+
+    from .errors import LirmUserError
+
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise LirmUserError(f"{path}: file not found (expected a transforms.json with cameras)") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise LirmUserError(f"{path}: cannot read it as JSON ({e})") from None
+    if not isinstance(data, dict) or not isinstance(data.get("frames"), list) or not data["frames"]:
+        raise LirmUserError(f"{path}: no 'frames' list; pass a transforms.json (e.g. one `lirm render` wrote)")
+    top = {k: v for k, v in data.items() if k != "frames"}
+    cameras = []
+    for k, frame in enumerate(data["frames"]):
+        try:
+            cameras.append(Camera.from_dict({**top, **frame}))
+        except (ValueError, TypeError, KeyError) as e:
+            raise LirmUserError(f"{path}: frame {k}: {e}") from None
+    return cameras
 
 
 def write_render_output(out: RenderOutput, out_dir: Path, stem: str, with_alpha: bool) -> dict[str, Path]:

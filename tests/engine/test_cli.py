@@ -81,6 +81,26 @@ def test_render_a_gltf_under_a_real_hdr(tmp_path, capsys, shared_data):
     assert len(list((tmp_path / "beauty").glob("*.png"))) == 2
 
 
+def test_render_from_given_cameras_keeps_the_asset_in_its_own_frame(tmp_path, capsys, shared_data):
+    """Issue 19: an asset and its copy render from the same cameras, view for view (--cameras), and the
+    asset is not refitted into the unit sphere (so a reconstruction in the original's frame lines up)."""
+    model = str(shared_data / "pbr_models" / "Avocado_tex256.glb")  # a few cm across: far from the unit sphere
+    first, again = tmp_path / "first", tmp_path / "again"
+    code, _, err = run_cli(capsys, "render", model, "--keep-scale", "--views", "2", "--size", "64x48", "--ibl", "preview",
+                           "-o", str(first))
+    assert code == 0, err
+    code, _, err = run_cli(capsys, "render", model, "--cameras", str(first / "transforms.json"), "--ibl", "preview",
+                           "--supersample", "2", "-o", str(again))
+    assert code == 0, err
+    for k in ("000", "001"):
+        a, b = (cv2.imread(str(folder / "beauty" / f"{k}.png")) for folder in (first, again))
+        assert a.shape == (48, 64, 3) and np.array_equal(a, b)
+    assert json.loads((again / "transforms.json").read_text())["lirm"]["asset_to_world"] == np.eye(4).tolist()
+    # A cameras file that is not there is named.
+    code, _, err = run_cli(capsys, "render", model, "--cameras", str(tmp_path / "nowhere.json"), "-o", str(tmp_path / "x"))
+    assert code == 3 and "nowhere.json: file not found" in err
+
+
 def _expect_user_error(capsys, *args: str, mentions: str, code: int = 3) -> str:
     """Exit code 3 (bad input) unless told, e.g. 2 for an option out of range."""
     got, _, err = run_cli(capsys, *args)
