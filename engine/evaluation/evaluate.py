@@ -65,6 +65,10 @@ class UpdateScores:
     chamfer: float | None
     views: int
     seconds: float | None = None  # mean time per object to reconstruct up to this row (scoring excluded)
+    relight_psnr_h: float | None = None  # the relighting test (relighting.py): HDR PSNR under a new environment
+    relight_psnr_l: float | None = None  # ... and on the tone-mapped display image
+    relight_ssim: float | None = None
+    relight_lpips: float | None = None
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -76,10 +80,21 @@ class EvalResult:
     objects: list[str]
     rows: list[UpdateScores]
     lpips_note: str  # why LPIPS is absent, or "" when it was computed
+    lighting: dict[str, str] = field(default_factory=dict)  # object -> "lit by X; relit by Y" (the relighting test)
 
     def to_dict(self) -> dict:
         return {"set": self.set_name, "objects": self.objects, "lpips": self.lpips_note or "computed",
-                "rows": [r.to_dict() for r in self.rows]}
+                "lighting": self.lighting, "rows": [r.to_dict() for r in self.rows]}
+
+
+def lighting_of(objects: list[HeldoutObject]) -> dict[str, str]:
+    """What lit each object's views, and what relights it (or why nothing does)."""
+    out = {}
+    for o in objects:
+        relit = (f"relit by {o.relight.name} (rotated {o.relight.rotation_deg:.0f}°)" if o.relight is not None
+                 else "not relit (no second environment)")
+        out[o.name] = f"lit by {o.lit_by or 'the photos’ own light'}; {relit}"
+    return out
 
 
 def _finite_mean(values: list[float]) -> float | None:
@@ -110,8 +125,9 @@ def model_inputs(model, obj: HeldoutObject, indices, device):
 
 @torch.no_grad()
 def score_field(field_, obj: HeldoutObject, outputs: list[int], config: EvalConfig, scores: dict[str, list[float]],
-                lpips_net=None) -> None:
-    """Render the field from the output views and append each metric to `scores` (the Chamfer distance once)."""
+                lpips_net=None, relighter=None) -> None:
+    """Render the field from the output views and append each metric to `scores` (the Chamfer distance
+    once); with a `relighter` (relighting.Relighter), also the relighting test of its export."""
     device = device_of(field_)
     step = 2.0 * field_.radius / config.render.samples_per_ray
     grid = OccupancyGrid.build(field_, field_.radius, config.render.beta, step, config.occupancy)
@@ -133,19 +149,23 @@ def score_field(field_, obj: HeldoutObject, outputs: list[int], config: EvalConf
             scores.setdefault("metallic", []).append(psnr(out["metallic"], truth.metallic[i] / denom, inside))
     if obj.surface is not None and len(obj.surface):
         scores.setdefault("chamfer", []).append(chamfer_distance(_field_mesh_points(field_, config), obj.surface))
+    if relighter is not None:
+        relighter.score(field_, obj, outputs, scores, lpips_net)
 
 
 def update_scores(update: int, s: dict[str, list[float]]) -> UpdateScores:
     return UpdateScores(update, _finite_mean(s.get("psnr", [])) or float("nan"), _finite_mean(s.get("ssim", [])) or float("nan"),
                         _finite_mean(s.get("lpips", [])), _finite_mean(s.get("albedo", [])), _finite_mean(s.get("roughness", [])),
                         _finite_mean(s.get("metallic", [])), _mean_or_inf(s.get("chamfer")), len(s.get("psnr", [])),
-                        _finite_mean(s.get("seconds", [])))
+                        _finite_mean(s.get("seconds", [])), _finite_mean(s.get("relight_psnr_h", [])),
+                        _finite_mean(s.get("relight_psnr_l", [])), _finite_mean(s.get("relight_ssim", [])),
+                        _finite_mean(s.get("relight_lpips", [])))
 
 
 @torch.no_grad()
 def evaluate_heldout(model: ProgressiveReconstructor, objects: list[HeldoutObject], config: EvalConfig = EvalConfig(),
                      set_name: str = "synthetic", progress: Progress | None = None,
-                     cancel: Callable[[], bool] | None = None) -> EvalResult:
+                     cancel: Callable[[], bool] | None = None, relighter=None) -> EvalResult:
     device = model_device(model)
     per_update: dict[int, dict[str, list[float]]] = {u: {} for u in range(1, config.updates + 1)}
     ok, why = lpips_available()
@@ -165,9 +185,9 @@ def evaluate_heldout(model: ProgressiveReconstructor, objects: list[HeldoutObjec
             decoded = model.decode(state)
             seconds += time.perf_counter() - start
             per_update[u].setdefault("seconds", []).append(seconds)
-            score_field(decoded, obj, outputs, config, per_update[u], lpips_net)
+            score_field(decoded, obj, outputs, config, per_update[u], lpips_net, relighter)
     rows = [update_scores(u, s) for u, s in per_update.items() if s]
-    return EvalResult(set_name, [o.name for o in objects], rows, "" if ok else f"LPIPS skipped: {why}")
+    return EvalResult(set_name, [o.name for o in objects], rows, "" if ok else f"LPIPS skipped: {why}", lighting_of(objects))
 
 
 def _mean_or_inf(values: list[float] | None) -> float | None:

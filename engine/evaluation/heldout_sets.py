@@ -6,6 +6,10 @@
 - gltf: the glTF models of a folder (../shared/data/pbr_models) under the HDRIs of another
   (../shared/data/envmaps), one environment per model in turn.
 
+Every object is also rendered from its output views under a second environment that lit none of its
+inputs (the next one in turn, randomly rotated): the truth of the relighting test (relighting.py).
+Each object names both (`lit_by`, `relight.name`), and the report prints them.
+
 Each object: 48 protocol cameras (elevations 0/20/40 x 16 azimuths, FoV 50, the bounding sphere
 just fitting), the seeded input sets and output views, ground-truth maps, and points on the true
 surface for the Chamfer distance. Inputs are cut as the capture pipeline cuts photos, the same
@@ -31,6 +35,7 @@ from lirm.renderer.pbr_renderer import PBRRenderer
 from lirm.renderer.procedural_environments import PROCEDURAL_ENVIRONMENTS
 
 from .chamfer import surface_samples
+from .relighting import RelightTruth, render_relight_truth
 
 HELDOUT_VARIANT_BASE = 2**31  # training's object variants are drawn from [0, 2^31 - 1)
 OBJECT_RADIUS = 0.8
@@ -44,10 +49,13 @@ class HeldoutObject:
     surface: np.ndarray | None  # (N, 3) points on the true surface, in the field's frame (None: unknown)
     inputs_prepared: bool = False  # the views are already the capture's crops (a real capture)
     mesh: tuple[np.ndarray, np.ndarray] | None = None  # the true surface as (vertices, faces), when known
+    lit_by: str = ""  # the environment (and rotation) the input and output views were rendered under
+    relight: RelightTruth | None = None  # the output views under an environment that lit none of the inputs
 
 
 def _render_object(renderer: PBRRenderer, name: str, model: LoadedModel, environment, rotation_deg: float, turn_deg: float,
-                   protocol: ProtocolViews, surface_points: int, seed: int) -> HeldoutObject:
+                   protocol: ProtocolViews, surface_points: int, seed: int, relight_environment=None,
+                   relight_rotation_deg: float = 0.0) -> HeldoutObject:
     meshes = model.meshes
     transform = normalizing_transform(model.bounds)
     c, s = np.cos(np.radians(turn_deg)), np.sin(np.radians(turn_deg))
@@ -67,7 +75,12 @@ def _render_object(renderer: PBRRenderer, name: str, model: LoadedModel, environ
         offset += len(m.positions)
     vertices, faces = np.concatenate(vertices).astype(np.float32), np.concatenate(faces)
     surface = surface_samples(vertices, faces, surface_points, seed)
-    return HeldoutObject(name, protocol, views, surface, mesh=(vertices, faces))
+    relight = None
+    if relight_environment is not None:
+        relight = render_relight_truth(renderer, meshes, transform, protocol.cameras, list(protocol.outputs), relight_environment,
+                                       relight_rotation_deg, auto_exposure_ev(relight_environment))
+    return HeldoutObject(name, protocol, views, surface, mesh=(vertices, faces),
+                         lit_by=f"{environment.name} (rotated {rotation_deg:.0f}°)", relight=relight)
 
 
 def synthetic_heldout(renderer: PBRRenderer, count: int = 8, size: int = 128, seed: int = 0,
@@ -83,8 +96,11 @@ def synthetic_heldout(renderer: PBRRenderer, count: int = 8, size: int = 128, se
         rotation, turn = float(rng.uniform(0, 360)), float(rng.uniform(0, 360))
         model = resolve_asset(name, seed=variant)
         env = resolve_environment(env_name, width=512)
+        # Drawn after the set's original draws, so that adding the relighting changed no object.
+        relight_rotation = float(np.random.default_rng([seed, 2025, i]).uniform(0, 360))
+        relight_env = resolve_environment(environments[(i + 1) % len(environments)], width=512)
         objects.append(_render_object(renderer, f"{name}#{i}", model, env, rotation, turn,
-                                      protocol_views(config, i), surface_points, seed + i))
+                                      protocol_views(config, i), surface_points, seed + i, relight_env, relight_rotation))
     return objects
 
 
@@ -97,8 +113,12 @@ def gltf_heldout(renderer: PBRRenderer, models: list[Path], environments: list[P
         env = resolve_environment(environments[i % len(environments)])
         model = resolve_asset(path)
         rotation = float(rng.uniform(0, 360))
+        relight_env, relight_rotation = None, 0.0
+        if len(environments) > 1:  # relit by an HDRI that lit none of its inputs
+            relight_env = resolve_environment(environments[(i + 1) % len(environments)])
+            relight_rotation = float(np.random.default_rng([seed, 4203, i]).uniform(0, 360))
         objects.append(_render_object(renderer, Path(path).stem, model, env, rotation, 0.0,
-                                      protocol_views(config, i), surface_points, seed + i))
+                                      protocol_views(config, i), surface_points, seed + i, relight_env, relight_rotation))
     return objects
 
 

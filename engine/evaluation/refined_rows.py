@@ -24,7 +24,7 @@ from lirm.engine.refine.refine_views import RefineViews
 from lirm.engine.refine.refiner import refine_field
 from lirm.engine.synth.view_crops import crop_like_capture
 
-from .evaluate import EvalConfig, EvalResult, model_device, model_inputs, score_field, update_scores
+from .evaluate import EvalConfig, EvalResult, lighting_of, model_device, model_inputs, score_field, update_scores
 from .heldout_sets import HeldoutObject
 
 Progress = Callable[[str, int, int], None]
@@ -68,7 +68,7 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
 
 
 def evaluate_refined(model, objects: list[HeldoutObject], config: EvalConfig, refine: RefineConfig, init: str,
-                     set_name: str = "synthetic", progress: Progress | None = None) -> EvalResult:
+                     set_name: str = "synthetic", progress: Progress | None = None, relighter=None) -> EvalResult:
     scores: dict[str, list[float]] = {}
     for k, obj in enumerate(objects):
         if progress:
@@ -77,11 +77,12 @@ def evaluate_refined(model, objects: list[HeldoutObject], config: EvalConfig, re
         outputs = obj.protocol.outputs[:config.output_views] if config.output_views else obj.protocol.outputs
         scores.setdefault("seconds", []).append(seconds)
         with torch.no_grad():
-            score_field(field, obj, outputs, config, scores)
+            score_field(field, obj, outputs, config, scores, relighter=relighter)
     if progress:
         progress("refined", len(objects), len(objects))
     updates = min(config.updates, min(len(o.protocol.input_sets) for o in objects)) if objects else config.updates
-    return EvalResult(set_name, [o.name for o in objects], [update_scores(updates, scores)], "LPIPS not computed for refined rows")
+    return EvalResult(set_name, [o.name for o in objects], [update_scores(updates, scores)], "LPIPS not computed for refined rows",
+                      lighting_of(objects))
 
 
 def per_object_scores(model, objects: list[HeldoutObject], config: EvalConfig, refine: RefineConfig, init: str) -> list[dict]:

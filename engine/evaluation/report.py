@@ -26,6 +26,27 @@ def _cells(r) -> str:
             f"{_fmt(r.roughness_psnr, 2)} | {_fmt(r.metallic_psnr, 2)} | {_fmt(r.chamfer, 4)} | {r.views} |")
 
 
+RELIGHT_NOTES = ("Relighting: the exported .glb (mesh, UV atlas, baked textures) rendered by the project's renderer "
+                 "under an environment that lit none of the inputs, against the true object under it, after "
+                 "Stanford-ORB's per-channel scale. PSNR-H on linear HDR radiance (peak: the truth's brightest "
+                 "object pixel), PSNR-L and SSIM on the tone-mapped images, over the union of the true and predicted masks.")
+
+
+def relighting_section(results: list[tuple[str, EvalResult]]) -> list[str]:
+    """The relighting test's table and what lit and relit each object ([] when no row has it)."""
+    rows = [(name, r) for name, result in results for r in result.rows if r.relight_psnr_l is not None]
+    if not rows:
+        return []
+    lines = ["", "Relighting test:", "", "| reconstructor | after update | PSNR-H ↑ | PSNR-L ↑ | SSIM ↑ | LPIPS ↓ |", "|---|---|---|---|---|---|"]
+    for name, r in rows:
+        lines.append(f"| {name} | {r.update} | {_fmt(r.relight_psnr_h, 2)} | {_fmt(r.relight_psnr_l, 2)} | "
+                     f"{_fmt(r.relight_ssim, 3)} | {_fmt(r.relight_lpips, 3)} |")
+    lines += ["", RELIGHT_NOTES, "", "Lighting per object:"]
+    lighting = results[0][1].lighting
+    lines += [f"- {obj}: {text}" for obj, text in lighting.items()]
+    return lines
+
+
 def markdown_table(result: EvalResult, title: str | None = None) -> str:
     lines = []
     if title:
@@ -40,6 +61,7 @@ def markdown_table(result: EvalResult, title: str | None = None) -> str:
     if result.lpips_note:
         notes.append(result.lpips_note + ".")
     lines += notes
+    lines += relighting_section([("", result)])
     return "\n".join(lines) + "\n"
 
 
@@ -59,4 +81,5 @@ def comparison_table(results: list[tuple[str, EvalResult]], title: str | None = 
               "and refinement), scoring excluded."]
     notes = sorted({result.lpips_note for _, result in results if result.lpips_note})
     lines += [note + "." for note in notes]
+    lines += relighting_section(results)
     return "\n".join(lines) + "\n"

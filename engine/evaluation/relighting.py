@@ -1,0 +1,148 @@
+"""The relighting test (Stanford-ORB's, issue 19): a reconstruction is exported as a user gets it (the
+.glb: mesh, UV atlas, baked PBR textures), loaded back, rendered through the project's renderer
+under an environment that lit none of its inputs, and compared with the true object under it.
+
+- PSNR-H: linear HDR radiance on the object's pixels (the union of the true and the predicted
+  masks, so a missing or extra part costs), with the truth's brightest object pixel as the peak.
+- PSNR-L: the same after the set's exposure, ACES and sRGB (the display image), peak 1.
+- SSIM (and LPIPS when it can run) on the display images, the background black in both.
+As Stanford-ORB does, the prediction is first scaled per channel by least squares on the object's
+pixels: albedo and light are only known up to a common scale, which no method can recover.
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lirm.engine.metrics import ssim
+from lirm.renderer.environment import Environment
+from lirm.renderer.pbr_renderer import PBRRenderer, RenderSettings
+from lirm.renderer.tonemap import tonemap
+
+
+@dataclass
+class RelightTruth:
+    """The true object under the relighting environment, seen from the output views."""
+
+    environment: Environment
+    rotation_deg: float
+    exposure_ev: float
+    radiance: dict[int, np.ndarray]  # output view -> (H, W, 3) linear HDR, black background
+    mask: dict[int, np.ndarray]  # output view -> (H, W) coverage
+
+    @property
+    def name(self) -> str:
+        return self.environment.name
+
+
+def render_relight_truth(renderer: PBRRenderer, meshes, transform: np.ndarray, cameras, outputs: list[int],
+                         environment: Environment, rotation_deg: float, exposure_ev: float) -> RelightTruth:
+    scene = renderer.upload(meshes, transform)
+    lighting = renderer.prepare_lighting(environment, rotation_deg=rotation_deg)
+    settings = RenderSettings(show_environment=False, supersample=2)
+    radiance, mask = {}, {}
+    try:
+        for i in outputs:
+            out = renderer.render_view(scene, cameras[i], lighting, settings)
+            radiance[i], mask[i] = out.radiance, out.mask
+    finally:
+        scene.release()
+        lighting.maps.release()
+    return RelightTruth(environment, rotation_deg, exposure_ev, radiance, mask)
+
+
+@dataclass(frozen=True)
+class RelightConfig:
+    grid: int = 96  # marching-cubes samples per side for the exported mesh
+    faces: int = 8_000
+    texture: int = 256
+
+
+class Relighter:
+    """Scores fields by the relighting test; owns one GL context for the exports and the renders."""
+
+    def __init__(self, config: RelightConfig = RelightConfig()):
+        from lirm.renderer.context import create_headless_context
+
+        self.config = config
+        self.ctx = create_headless_context()
+        self.renderer = PBRRenderer(self.ctx)
+        self._lighting_key = None
+        self._lighting = None
+
+    def score(self, field_, obj, outputs: list[int], scores: dict[str, list[float]], lpips_net=None) -> None:
+        truth = getattr(obj, "relight", None)
+        if truth is None:
+            return
+        from lirm.engine.assets.model_loader import load_model
+        from lirm.engine.export.export_asset import ExportConfig, export_field
+        from lirm.engine.export.field_mesh import MeshExtractionConfig, NoSurfaceError
+
+        config = ExportConfig(mesh=MeshExtractionConfig(resolution=self.config.grid, face_budget=self.config.faces),
+                              texture_size=self.config.texture)
+        with tempfile.TemporaryDirectory(prefix="lirm-relight-") as tmp:
+            path = Path(tmp) / "asset.glb"
+            try:
+                export_field(field_, path, config, context=self.ctx)
+            except NoSurfaceError:
+                for key in ("relight_psnr_h", "relight_psnr_l", "relight_ssim"):
+                    scores.setdefault(key, []).append(float("nan"))
+                return
+            model = load_model(path)  # what a user opens: the .glb read back, in its own (the field's) frame
+        lighting = self._lighting_for(obj, truth)
+        scene = self.renderer.upload(model.meshes)
+        try:
+            for i in outputs:
+                out = self.renderer.render_view(scene, obj.views.cameras[i], lighting, RenderSettings(show_environment=False, supersample=2))
+                for key, value in relight_metrics(out.radiance, out.mask, truth.radiance[i], truth.mask[i], truth.exposure_ev,
+                                                  lpips_net).items():
+                    scores.setdefault(key, []).append(value)
+        finally:
+            scene.release()
+
+    def _lighting_for(self, obj, truth: RelightTruth):
+        key = (obj.name, truth.name, truth.rotation_deg)
+        if key != self._lighting_key:
+            if self._lighting is not None:
+                self._lighting.maps.release()
+            self._lighting = self.renderer.prepare_lighting(truth.environment, rotation_deg=truth.rotation_deg)
+            self._lighting_key = key
+        return self._lighting
+
+    def release(self) -> None:
+        if self._lighting is not None:
+            self._lighting.maps.release()
+        self.renderer.release()
+        self.ctx.release()
+
+
+def relight_metrics(radiance: np.ndarray, mask: np.ndarray, true_radiance: np.ndarray, true_mask: np.ndarray,
+                    exposure_ev: float, lpips_net=None) -> dict[str, float]:
+    region = (true_mask > 0.5) | (mask > 0.5)
+    if not region.any():
+        return {}
+    p = np.asarray(radiance, np.float64)
+    t = np.asarray(true_radiance, np.float64)
+    scale = (p[region] * t[region]).sum(0) / np.maximum((p[region] ** 2).sum(0), 1e-12)
+    p = p * scale
+    peak = max(float(t[region].max()), 1e-6)
+    mse_h = float(((p[region] - t[region]) ** 2).mean())
+    shown_p, shown_t = tonemap(p, exposure_ev), tonemap(t, exposure_ev)
+    mse_l = float(((shown_p[region] - shown_t[region]) ** 2).mean())
+    out = {"relight_psnr_h": _db(peak * peak, mse_h), "relight_psnr_l": _db(1.0, mse_l), "relight_ssim": ssim(shown_p, shown_t)}
+    if lpips_net is not None:
+        import torch
+
+        as_tensor = lambda a: torch.from_numpy(np.ascontiguousarray(a, np.float32)).permute(2, 0, 1)[None]  # noqa: E731
+        with torch.no_grad():
+            out["relight_lpips"] = float(lpips_net(as_tensor(shown_p), as_tensor(shown_t)))
+    return out
+
+
+def _db(peak_squared: float, mse: float) -> float:
+    return float("inf") if mse == 0 else float(10.0 * math.log10(peak_squared / mse))
