@@ -240,6 +240,10 @@ def build_parser() -> argparse.ArgumentParser:
     rf.add_argument("--grid-resolution", type=int, default=128, help="occupancy grid voxels per side for those renders (default 128)")
     rf.add_argument("--live", type=Path, help="keep the field as it fits in this file (replaced every --live-every seconds, removed at the end)")
     rf.add_argument("--live-every", type=float, default=5.0, help="seconds between those snapshots (default 5)")
+    rf.add_argument("--materials", action="store_true",
+                    help="inverse-render the materials: shade them under the capture's lighting (fitted with them, "
+                         "from the estimate `lirm capture` made) and fit that to the photos, so that albedo holds no "
+                         "baked shading (experimental: see the README's relighting figures)")
     rf.set_defaults(run=_run_refine)
 
     ex = sub.add_parser("export", help="the capture's latest reconstruction as a textured PBR .glb")
@@ -302,6 +306,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="also refine after the last update on the same input views: the rows 'refined from LIRM' and "
                          "'refined from the hull', with the seconds each took")
     ev.add_argument("--refine-minutes", type=float, help="time budget of each refinement (default: lirm refine's, 3 minutes)")
+    ev.add_argument("--materials", action="store_true",
+                    help="the refined rows inverse-render the materials (as `lirm refine --materials`), under the lighting "
+                         "estimated from the input views' backgrounds")
     ev.add_argument("--no-relight", action="store_true",
                     help="skip the relighting test (each row's .glb export rendered under an environment that lit none "
                          "of the inputs; about 10 s per object and row on 2 cores)")
@@ -813,7 +820,7 @@ def _run_refine(args: argparse.Namespace) -> int:
     device = ("cuda" if torch.cuda.is_available() else "cpu") if args.device == "auto" else args.device
     if device.startswith("cuda") and not torch.cuda.is_available():
         raise LirmUserError("--device cuda: no CUDA device is available here; use --device cpu")
-    overrides = {"device": device}
+    overrides = {"device": device, "inverse_rendering": bool(args.materials)}
     if args.minutes is not None:
         overrides["minutes"] = args.minutes
     if args.iterations is not None:
@@ -1183,7 +1190,8 @@ def _evaluate_contenders(args, contenders, objects, config, model, relighter, re
 
         if args.refine_minutes is not None and not args.refine_minutes > 0:
             raise LirmUsageError(f"--refine-minutes must be positive, got {args.refine_minutes}")
-        refine = refine_preset("default", **({"minutes": args.refine_minutes} if args.refine_minutes else {}))
+        refine = refine_preset("default", inverse_rendering=bool(args.materials),
+                               **({"minutes": args.refine_minutes} if args.refine_minutes else {}))
         for name, init in (("refined from LIRM", "lirm"), ("refined from the hull", "hull")):
             bar = _progress_bar(len(objects), f"{name} ({refine.minutes:g} min each)")
             bar.unit = "object"

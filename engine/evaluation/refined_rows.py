@@ -63,8 +63,24 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
         refinable = initial_fields.scratch(model.config, resolution, refine.seed)
     else:
         raise ValueError(f"unknown init {init!r}")
-    result = refine_field(refinable, views, refine, grid)
+    lighting = input_lighting(obj, [i for s in sets for i in s], refine) if refine.inverse_rendering else None
+    result = refine_field(refinable, views, refine, grid, lighting=lighting)
     return result.field.frozen_field(), time.perf_counter() - start, result.steps
+
+
+def input_lighting(obj: HeldoutObject, indices: list[int], refine: RefineConfig):
+    """The lighting estimate a capture would make, from the input views' backgrounds (the full frames
+    with the environment behind), as the fittable panorama the inverse rendering starts from. The
+    held-out sets' backdrops are environments at infinity, so the proxy sphere is far away."""
+    from lirm.engine.lighting.capture_lighting import CaptureLightingConfig, estimate_capture_lighting
+    from lirm.engine.lighting.panorama_lighting import PanoramaLighting
+
+    chosen = obj.views.select(indices)
+    images = {i: np.round(chosen.image_bg[k] * 255).astype(np.uint8) for k, i in enumerate(indices)}
+    masks = {i: np.where(chosen.mask[k] > 0.5, 255, 0).astype(np.uint8) for k, i in enumerate(indices)}
+    cameras = {i: chosen.cameras[k] for k, i in enumerate(indices)}
+    estimate = estimate_capture_lighting(images, masks, cameras, CaptureLightingConfig(proxy_radius=50.0))
+    return PanoramaLighting.from_capture_lighting(estimate, refine.lighting_height)
 
 
 def evaluate_refined(model, objects: list[HeldoutObject], config: EvalConfig, refine: RefineConfig, init: str,

@@ -36,3 +36,22 @@ def display_to_radiance(display: np.ndarray, response: str = "aces") -> np.ndarr
     c = -(0.000090537 + 0.238081 * y)
     v = (-b + np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))) / (2.0 * a)
     return np.maximum(v @ np.linalg.inv(ACES_INPUT).T, 0.0)
+
+
+def radiance_to_display_torch(radiance, response: str = "aces"):
+    """Differentiable forward of the camera model (renderer/tonemap.py's `tonemap` at exposure 0):
+    linear radiance (..., 3) -> display sRGB in [0, 1]."""
+    import torch
+
+    if response not in RESPONSES:
+        raise ValueError(f"unknown camera response {response!r}; choose one of {', '.join(RESPONSES)}")
+    c = radiance.clamp(min=0.0)
+    if response == "aces":
+        m_in = torch.as_tensor(ACES_INPUT, dtype=c.dtype, device=c.device)
+        m_out = torch.as_tensor(ACES_OUTPUT, dtype=c.dtype, device=c.device)
+        v = c @ m_in.T
+        a = v * (v + 0.0245786) - 0.000090537
+        b = v * (0.983729 * v + 0.4329510) + 0.238081
+        c = (a / b) @ m_out.T
+    c = c.clamp(0.0, 1.0)
+    return torch.where(c <= 0.0031308, 12.92 * c, 1.055 * c.clamp(min=0.0031308) ** (1.0 / 2.4) - 0.055)

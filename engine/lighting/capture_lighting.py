@@ -35,6 +35,7 @@ LIGHTING_FOLDER = "lighting"
 PANORAMA_FILE = "as_photographed.hdr"
 PICTURE_FILE = "as_photographed.png"
 INFO_FILE = "lighting.json"
+OBSERVED_FILE = "observed.npz"  # per texel: photo pixels that landed there, and the share clipped
 ENVIRONMENT_NAME = "as photographed"
 
 
@@ -83,6 +84,11 @@ class CaptureLighting:
             raise OSError(f"{folder / PANORAMA_FILE}: OpenCV could not encode the panorama")
         atomic_write(folder / PANORAMA_FILE, lambda tmp: tmp.write_bytes(encoded.tobytes()))
         write_png(folder / PICTURE_FILE, lighting_picture(self))
+
+        def write_observed(tmp: Path) -> None:
+            with open(tmp, "wb") as handle:
+                np.savez_compressed(handle, observed=self.observed.astype(np.float32), clipped=self.clipped.astype(np.float32))
+        atomic_write(folder / OBSERVED_FILE, write_observed)
         atomic_write_json(folder / INFO_FILE, {
             "photos_used": self.photos_used, "seen_fraction": round(self.seen_fraction, 4),
             "clipped_fraction_of_seen": round(self.clipped_fraction, 4), "config": asdict(self.config),
@@ -211,6 +217,22 @@ def _upsample_wrapped(image: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     if ww < shape[1]:
         out[:, ww:] = out[:, ww - 1:ww]
     return out
+
+
+def load_capture_lighting(capture_root: str | Path) -> CaptureLighting | None:
+    """The capture's saved estimate (None when it has none)."""
+    from lirm.engine.assets.environment_files import load_environment_file
+
+    folder = Path(capture_root) / LIGHTING_FOLDER
+    if not (folder / PANORAMA_FILE).is_file() or not (folder / OBSERVED_FILE).is_file():
+        return None
+    environment = load_environment_file(folder / PANORAMA_FILE)
+    environment.name = ENVIRONMENT_NAME
+    with np.load(folder / OBSERVED_FILE) as data:
+        observed, clipped = data["observed"].astype(np.float64), data["clipped"].astype(np.float64)
+    info = load_capture_lighting_info(capture_root) or {}
+    config = CaptureLightingConfig(**info["config"]) if "config" in info else CaptureLightingConfig()
+    return CaptureLighting(environment, observed, clipped, int(info.get("photos_used", 0)), config)
 
 
 def load_capture_lighting_info(capture_root: str | Path) -> dict | None:

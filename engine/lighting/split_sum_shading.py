@@ -36,6 +36,16 @@ class SplitSumTables:
         return SplitSumTables([s.to(device, dtype) for s in self.specular], self.irradiance.to(device, dtype),
                               self.brdf_lut.to(device, dtype), self.world_to_environment.to(device, dtype), self.intensity)
 
+    # The lighting interface `shade` reads (panorama_lighting.py gives the same from a learnable panorama).
+    def prefiltered(self, directions: torch.Tensor, roughness: torch.Tensor) -> torch.Tensor:
+        return prefiltered_specular(self, directions @ self.world_to_environment.T, roughness) * self.intensity
+
+    def irradiance_over_pi(self, normals: torch.Tensor) -> torch.Tensor:
+        return equirect_lookup(self.irradiance, normals @ self.world_to_environment.T) * self.intensity
+
+    def brdf(self, n_dot_v: torch.Tensor, roughness: torch.Tensor) -> torch.Tensor:
+        return lut_lookup(self.brdf_lut, n_dot_v, roughness)
+
 
 def equirect_lookup(table: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
     """Bilinear (H, W, C) lookup at unit directions (N, 3), wrapping in longitude: the same mapping
@@ -92,9 +102,12 @@ class ShadingTerms:
     specular: torch.Tensor  # (N, 3) the specular part (single + multiple scattering)
 
 
-def shade(tables: SplitSumTables, albedo: torch.Tensor, roughness: torch.Tensor, metallic: torch.Tensor,
+def shade(lighting, albedo: torch.Tensor, roughness: torch.Tensor, metallic: torch.Tensor,
           normal: torch.Tensor, view: torch.Tensor, multiple_scattering: bool = True) -> ShadingTerms:
-    """Outgoing radiance toward `view` (unit, surface -> eye) of (N,) surface points. Mirrors mesh_pbr.frag."""
+    """Outgoing radiance toward `view` (unit, surface -> eye) of (N,) surface points. Mirrors mesh_pbr.frag.
+
+    `lighting` gives prefiltered(world directions, roughness), irradiance_over_pi(world normals) and
+    brdf(N.V, roughness) -> (A, B): SplitSumTables (the renderer's own maps) or a PanoramaLighting."""
     roughness = roughness.clamp(0.0, 1.0)
     metallic = metallic.clamp(0.0, 1.0)
     n = normal / normal.norm(dim=-1, keepdim=True).clamp(min=1e-12)
@@ -104,12 +117,11 @@ def shade(tables: SplitSumTables, albedo: torch.Tensor, roughness: torch.Tensor,
     m = metallic[:, None]
     diffuse_colour = albedo * (1.0 - m)
     f0 = 0.04 * (1.0 - m) + albedo * m
-    ab = lut_lookup(tables.brdf_lut, n_dot_v, roughness)
+    ab = lighting.brdf(n_dot_v, roughness)
     a, b = ab[:, :1], ab[:, 1:]
     reflected = 2.0 * cos[:, None] * n - v  # GLSL reflect(-v, n)
-    rotation = tables.world_to_environment
-    specular_light = prefiltered_specular(tables, reflected @ rotation.T, roughness)
-    irradiance = equirect_lookup(tables.irradiance, n @ rotation.T)
+    specular_light = lighting.prefiltered(reflected, roughness)
+    irradiance = lighting.irradiance_over_pi(n)
 
     fresnel_roughness = torch.maximum((1.0 - roughness)[:, None].expand_as(f0), f0) - f0
     k_s = f0 + fresnel_roughness * (1.0 - n_dot_v)[:, None] ** 5
@@ -121,6 +133,6 @@ def shade(tables: SplitSumTables, albedo: torch.Tensor, roughness: torch.Tensor,
     else:
         fms_ems = torch.zeros_like(fss_ess)
     k_d = diffuse_colour * (1.0 - fss_ess - fms_ems)
-    specular = (fss_ess * specular_light + fms_ems * irradiance) * tables.intensity
-    diffuse = k_d * irradiance * tables.intensity
+    specular = fss_ess * specular_light + fms_ems * irradiance
+    diffuse = k_d * irradiance
     return ShadingTerms(specular + diffuse, diffuse, specular)

@@ -153,8 +153,19 @@ def _refine_locked(capture_dir, source: ModelSource, config: RefineConfig, init:
     if live_path is not None:
         def live(current) -> None:
             save_field_state(current.frozen_field(), live_path, updates=len(capture.updates) + 1, extra={"live": True})
+    lighting = None
+    if config.inverse_rendering:
+        from lirm.engine.lighting.capture_lighting import load_capture_lighting
+        from lirm.engine.lighting.panorama_lighting import PanoramaLighting
+
+        estimate = load_capture_lighting(capture.root)
+        if estimate is None:
+            notes.append("no lighting estimate in the capture (`lirm capture --resume` makes one): the materials "
+                         "are not inverse-rendered")
+        else:
+            lighting = PanoramaLighting.from_capture_lighting(estimate, config.lighting_height)
     try:
-        result = refine_field(refinable, views, config, grid, progress, cancel, live, live_every)
+        result = refine_field(refinable, views, config, grid, progress, cancel, live, live_every, lighting=lighting)
     finally:
         if live_path is not None:
             Path(live_path).unlink(missing_ok=True)
@@ -174,6 +185,8 @@ def _refine_locked(capture_dir, source: ModelSource, config: RefineConfig, init:
                   "best_step": result.best_step, "best_loss": result.best_loss, "holdout": holdout,
                   "settings": config.to_dict(), "losses": result.history, "notes": notes}
         atomic_write_json(folder / "refine.json", record)
+        if result.lighting is not None:
+            _save_fitted_lighting(result.lighting, folder)
         state_path = build.final_state_path(number)
         rel = str(Path(state_path).parent)
         entry = {"update": number, "kind": "refine", "frames": fitted, "held_out": held,
@@ -189,6 +202,23 @@ def _refine_locked(capture_dir, source: ModelSource, config: RefineConfig, init:
         build.commit(number - 1, [entry], summary, [log])
     out_dir = capture.root / rel
     return RefineStepResult(number, out_dir, started_from, result.steps, result.seconds, result.stopped, holdout, notes)
+
+
+def _save_fitted_lighting(lighting, folder: Path) -> None:
+    """The lighting fitted with the materials, beside the state (lighting.hdr and a picture)."""
+    import cv2
+
+    from lirm.engine.io.atomic_files import atomic_write
+    from lirm.engine.io.images import write_png
+    from lirm.renderer.tonemap import tonemap
+
+    environment = lighting.environment()
+    ok, encoded = cv2.imencode(".hdr", np.ascontiguousarray(environment.radiance[:, :, ::-1], dtype=np.float32))
+    if ok:
+        atomic_write(folder / "lighting.hdr", lambda tmp: tmp.write_bytes(encoded.tobytes()))
+    key = max(float(np.median(environment.radiance.mean(-1))), 1e-6)
+    picture = cv2.resize(tonemap(environment.radiance * (0.18 / key)).astype(np.float32), (512, 256), interpolation=cv2.INTER_NEAREST)
+    write_png(folder / "lighting.png", (picture * 255).astype(np.uint8))
 
 
 @torch.no_grad()

@@ -19,6 +19,12 @@ class LossWeights:
     albedo: float = 0.1  # albedo against the linearised observed colour (stand-in for inverse rendering)
     material_prior: float = 0.01  # roughness toward 0.5 and metallic toward 0 where nothing else says otherwise
     plane_tv: float = 0.0  # total variation of the planes (sparse views at high plane resolution)
+    # Inverse rendering (with RefineConfig.inverse_rendering and a lighting estimate): the PBR materials
+    # shaded under the capture's lighting against the photo, the lighting held to what the photos'
+    # backgrounds saw and smooth where they saw nothing.
+    pbr: float = 0.5
+    light_seen: float = 0.2
+    light_smooth: float = 0.02
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -46,6 +52,12 @@ class RefineConfig:
     best_every: int = 20  # steps between checks of the running loss for the best state so far
     seed: int = 0
     device: str = "cpu"
+    # Inverse rendering: fit the materials (and the lighting, from the capture's estimate) through the
+    # renderer's split-sum shading, from `pbr_start` of the budget on (the shape settles first).
+    inverse_rendering: bool = False
+    pbr_start: float = 0.25
+    lighting_lr: float = 3e-2
+    lighting_height: int = 16  # the fitted panorama's rows (x 2 columns)
     losses: LossWeights = field(default_factory=LossWeights)
 
     def __post_init__(self) -> None:

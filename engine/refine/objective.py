@@ -3,8 +3,13 @@ material prior (weights in config.LossWeights; the README says what each was wor
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import torch
 import torch.nn.functional as F
+
+from lirm.engine.lighting.camera_response import radiance_to_display_torch
+from lirm.engine.lighting.split_sum_shading import shade
 
 from .config import LossWeights
 from .ray_rendering import RayBatchRender
@@ -24,9 +29,14 @@ def sdf_gradients(field, points: torch.Tensor, eps: float) -> torch.Tensor:
 
 
 def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: torch.Tensor, weights: LossWeights,
-               eikonal_points: int, generator: torch.Generator) -> tuple[torch.Tensor, dict[str, float]]:
+               eikonal_points: int, generator: torch.Generator, lighting=None,
+               directions: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, float]]:
+    """With `lighting` (a PanoramaLighting) and the rays' `directions`, the inverse-rendering terms too."""
     terms: dict[str, torch.Tensor] = {}
     terms["colour"] = (render.colour - colours).abs().mean()
+    if lighting is not None:
+        terms.update(inverse_rendering_terms(render, colours, alphas, lighting, directions))
+        weights = replace(weights, albedo=0.0)  # the albedo is fitted through the shading, not to the colour
     if weights.mask:
         opacity = render.opacity.clamp(1e-4, 1.0 - 1e-4)
         terms["mask"] = F.binary_cross_entropy(opacity, alphas)
@@ -56,3 +66,23 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
         terms["plane_tv"] = ((planes[..., 1:, :] - planes[..., :-1, :]) ** 2).mean() + ((planes[..., 1:] - planes[..., :-1]) ** 2).mean()
     total = sum(getattr(weights, name) * value for name, value in terms.items())
     return total, {name: float(value.detach()) for name, value in terms.items()}
+
+
+def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alphas: torch.Tensor, lighting,
+                            directions: torch.Tensor) -> dict[str, torch.Tensor]:
+    """The PBR materials at the rays' surfaces shaded under `lighting` (the renderer's split-sum model),
+    through the camera's tone curve, against the photo, where both say object; and the lighting's own
+    terms (what the backgrounds saw, smoothness)."""
+    opacity = render.opacity
+    solid = (alphas > 0.99) & (opacity.detach() > 0.5)
+    terms = {"light_seen": lighting.observation_loss(), "light_smooth": lighting.smoothness_loss()}
+    if not solid.any():
+        terms["pbr"] = opacity.new_zeros(())
+        return terms
+    o = opacity[solid].clamp(min=1e-3)
+    albedo = (render.albedo[solid] / o[:, None]).clamp(0.0, 1.0)
+    roughness = (render.roughness[solid] / o).clamp(0.0, 1.0)
+    metallic = (render.metallic[solid] / o).clamp(0.0, 1.0)
+    shaded = shade(lighting, albedo, roughness, metallic, render.normal[solid], -directions[solid]).radiance
+    terms["pbr"] = (radiance_to_display_torch(shaded) - colours[solid]).abs().mean()
+    return terms

@@ -49,13 +49,16 @@ class RefineResult:
     best_loss: float
     stopped: str  # "budget", "iterations" or "cancelled"
     history: list[dict] = field(default_factory=list)  # every `best_every` steps: step, seconds, loss, terms
+    lighting: object | None = None  # the fitted PanoramaLighting (inverse rendering), at the best state
 
 
-def _optimiser(refinable: RefinableField, config: RefineConfig) -> torch.optim.Optimizer:
+def _optimiser(refinable: RefinableField, config: RefineConfig, lighting=None) -> torch.optim.Optimizer:
     groups = [{"params": [refinable.planes], "lr": config.plane_lr, "base_lr": config.plane_lr},
               {"params": list(refinable.heads.parameters()), "lr": config.head_lr, "base_lr": config.head_lr}]
     if refinable.panoramas is not None:
         groups.append({"params": [refinable.panoramas], "lr": config.nde_lr, "base_lr": config.nde_lr})
+    if lighting is not None:
+        groups.append({"params": list(lighting.parameters()), "lr": config.lighting_lr, "base_lr": config.lighting_lr})
     return torch.optim.Adam(groups, betas=(0.9, 0.99), eps=1e-15)
 
 
@@ -66,19 +69,26 @@ def _stage(fraction: float, stages: int) -> int:
 def refine_field(refinable: RefinableField, views: RefineViews, config: RefineConfig, grid: OccupancyGrid | None,
                  progress: Callable[[RefineTick], None] | None = None,
                  cancel: Callable[[], bool] | None = None,
-                 live: Callable[[RefinableField], None] | None = None, live_every: float = 5.0) -> RefineResult:
+                 live: Callable[[RefinableField], None] | None = None, live_every: float = 5.0,
+                 lighting=None) -> RefineResult:
     """`live`, when given, is called with the field as it is every `live_every` seconds (the app shows
-    it while the fit runs)."""
+    it while the fit runs). `lighting` (a PanoramaLighting), with config.inverse_rendering, turns on
+    the inverse rendering of the materials, fitting the lighting with them."""
     device = torch.device(config.device)
     refinable.to(device)
+    if not config.inverse_rendering:
+        lighting = None
+    if lighting is not None:
+        lighting.to(device)
     generator = torch.Generator().manual_seed(config.seed)
     budget = None if config.minutes is None else 60.0 * config.minutes
     resolutions = config.plane_resolutions
     refinable.resample_planes(resolutions[0])
-    optimiser = _optimiser(refinable, config)
+    optimiser = _optimiser(refinable, config, lighting)
     stage = 0
     ema_loss = ema_mse = None
     best = (math.inf, 0, refinable.snapshot())
+    best_lighting = None if lighting is None else {k: v.detach().clone() for k, v in lighting.state_dict().items()}
     history: list[dict] = []
     start = time.perf_counter()
     step, stopped = 0, "iterations"
@@ -97,7 +107,7 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
             if wanted != stage:
                 stage = wanted
                 refinable.resample_planes(resolutions[stage])
-                optimiser = _optimiser(refinable, config)
+                optimiser = _optimiser(refinable, config, lighting)
                 # The best state so far was at a coarser resolution; compare afresh from here.
                 best = (math.inf, best[1], best[2])
                 ema_loss = None
@@ -112,7 +122,9 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
             field_ = refinable.field()
             render = render_ray_batch(field_, origins, directions, grid, 1.0 / inv_beta, config.coarse_samples,
                                       config.fine_samples, generator)
-            loss, terms = batch_loss(field_, render, colours, alphas, config.losses, config.eikonal_points, generator)
+            shading = lighting if lighting is not None and fraction >= config.pbr_start else None
+            loss, terms = batch_loss(field_, render, colours, alphas, config.losses, config.eikonal_points, generator,
+                                     shading, directions)
             optimiser.zero_grad(set_to_none=True)
             loss.backward()
             optimiser.step()
@@ -129,6 +141,8 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
                 # throw away the detail the finer planes are there for.
                 if ema_loss < best[0] and stage == len(resolutions) - 1:
                     best = (ema_loss, step, refinable.snapshot())
+                    if lighting is not None:
+                        best_lighting = {k: v.detach().clone() for k, v in lighting.state_dict().items()}
             if live is not None and time.perf_counter() - last_live >= live_every:
                 live(refinable)
                 last_live = time.perf_counter()
@@ -151,4 +165,6 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
         best_step, best_loss = step, (ema_loss if ema_loss is not None else math.inf)
     else:
         refinable.load_snapshot(snapshot)
-    return RefineResult(refinable, step, seconds, best_step, best_loss, stopped, history)
+        if lighting is not None and best_lighting is not None:
+            lighting.load_state_dict(best_lighting)
+    return RefineResult(refinable, step, seconds, best_step, best_loss, stopped, history, lighting)

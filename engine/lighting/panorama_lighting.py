@@ -1,0 +1,131 @@
+"""A low-resolution environment that the refinement can fit, with the split-sum lighting terms
+computed from it directly in torch (so they differentiate with respect to every texel).
+
+Parametrised as log-radiance on a small equirectangular grid (16 x 32 by default: 11 degree texels,
+enough for the diffuse light and the broad lobes that carry most of what a few photos say about
+light). The split-sum pieces:
+- irradiance / pi at a normal: the cosine-weighted sum over texels (exact for this panorama);
+- prefiltered specular at a reflected direction and roughness: the texels weighted by a spherical
+  Gaussian lobe around it (the usual fit of GGX, sharpness 2 / alpha^2 about the half vector, so
+  1 / (2 alpha^2) about the reflected direction), its width never below the texel spacing;
+- the BRDF table (A, B): integrated once in numpy (renderer/brdf_reference.py) and cached.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+import torch
+
+from lirm.renderer.brdf_reference import split_sum_terms
+from lirm.renderer.environment import Environment
+
+from .split_sum_shading import lut_lookup
+
+
+@functools.lru_cache(maxsize=2)
+def brdf_table(size: int = 32, samples: int = 4096) -> torch.Tensor:
+    """(size, size, 2): rows = roughness, columns = N.V at texel centres, as the renderer's LUT."""
+    table = np.zeros((size, size, 2), np.float32)
+    for row in range(size):
+        for col in range(size):
+            table[row, col] = split_sum_terms((col + 0.5) / size, (row + 0.5) / size, samples=samples, seed=row * size + col)
+    return torch.from_numpy(table)
+
+
+class PanoramaLighting(torch.nn.Module):
+    def __init__(self, log_radiance: torch.Tensor):
+        super().__init__()
+        height, width = log_radiance.shape[:2]
+        self.log_radiance = torch.nn.Parameter(log_radiance.clone().float())
+        u = (torch.arange(width, dtype=torch.float64) + 0.5) / width
+        v = (torch.arange(height, dtype=torch.float64) + 0.5) / height
+        phi = (0.5 - u) * 2.0 * math.pi
+        theta = v * math.pi
+        t, p = torch.meshgrid(theta, phi, indexing="ij")
+        dirs = torch.stack([torch.sin(t) * torch.cos(p), torch.sin(t) * torch.sin(p), torch.cos(t)], -1)
+        edges = torch.linspace(0.0, math.pi, height + 1, dtype=torch.float64)
+        band = (torch.cos(edges[:-1]) - torch.cos(edges[1:])) * (2.0 * math.pi / width)
+        self.register_buffer("directions", dirs.reshape(-1, 3).float())
+        self.register_buffer("solid_angle", band[:, None].expand(height, width).reshape(-1).float())
+        self.register_buffer("lut", brdf_table())
+        self.min_lobe_cos = math.cos(math.pi / height)  # a texel's angular size
+
+    @classmethod
+    def from_environment(cls, environment: Environment, height: int = 16) -> "PanoramaLighting":
+        """Area-average `environment` down to height x 2 height texels."""
+        mean = _area_mean(environment.radiance, environment, height)
+        return cls(torch.from_numpy(np.log(np.maximum(mean, 1e-4))))
+
+    @classmethod
+    def from_capture_lighting(cls, lighting, height: int = 16) -> "PanoramaLighting":
+        """From a capture's estimate (capture_lighting.CaptureLighting): starts as its filled panorama
+        and keeps what the photos saw as an observation (`observation_loss`); clipped texels are
+        lower bounds only."""
+        panorama = cls.from_environment(lighting.environment, height)
+        env = lighting.environment
+        seen = (lighting.observed > 0).astype(np.float64)
+        clipped = seen * lighting.clipped
+        seen_share = _area_mean(seen[..., None], env, height)[..., 0]
+        clipped_share = _area_mean(clipped[..., None], env, height)[..., 0] / np.maximum(seen_share, 1e-9)
+        observed_mean = _area_mean(env.radiance * seen[..., None], env, height) / np.maximum(seen_share, 1e-9)[..., None]
+        panorama.register_buffer("observed_log", torch.from_numpy(np.log(np.maximum(observed_mean, 1e-4))).float())
+        panorama.register_buffer("seen_share", torch.from_numpy(seen_share).float())
+        panorama.register_buffer("clipped_share", torch.from_numpy(np.clip(clipped_share, 0.0, 1.0)).float())
+        return panorama
+
+    def observation_loss(self) -> torch.Tensor:
+        """How far the panorama is from what the photos' backgrounds saw: L1 in log radiance on seen
+        texels (weighted by how much of each was seen), and for clipped ones only when below the
+        clipped value (the light there was at least that bright)."""
+        if not hasattr(self, "observed_log"):
+            return self.log_radiance.new_zeros(())
+        difference = self.log_radiance - self.observed_log
+        unclipped = (1.0 - self.clipped_share)[..., None]
+        per_texel = unclipped * difference.abs() + (1.0 - unclipped) * (-difference).clamp(min=0.0)
+        weight = self.seen_share[..., None]
+        return (weight * per_texel).sum() / weight.sum().clamp(min=1e-6) / 3.0
+
+    def smoothness_loss(self) -> torch.Tensor:
+        """Total variation of the log radiance (wrapping in longitude): unseen light stays plausible."""
+        x = self.log_radiance
+        return (x - x.roll(1, dims=1)).abs().mean() + (x[1:] - x[:-1]).abs().mean()
+
+    @property
+    def radiance(self) -> torch.Tensor:
+        return self.log_radiance.exp()
+
+    def environment(self, name: str = "as photographed (refined)") -> Environment:
+        return Environment(self.radiance.detach().cpu().numpy().astype(np.float32), name=name)
+
+    # The lighting interface of split_sum_shading.shade.
+    def irradiance_over_pi(self, normals: torch.Tensor) -> torch.Tensor:
+        cosine = (normals @ self.directions.T).clamp(min=0.0) * self.solid_angle
+        return cosine @ self.radiance.reshape(-1, 3) / math.pi
+
+    def prefiltered(self, directions: torch.Tensor, roughness: torch.Tensor) -> torch.Tensor:
+        alpha = roughness.clamp(0.0, 1.0) ** 2
+        sharpness = 1.0 / (2.0 * alpha * alpha).clamp(min=1e-6)
+        sharpness = sharpness.clamp(max=2.0 / (1.0 - self.min_lobe_cos))  # no narrower than a texel
+        d = directions / directions.norm(dim=-1, keepdim=True).clamp(min=1e-12)
+        weights = torch.exp(sharpness[:, None] * ((d @ self.directions.T) - 1.0)) * self.solid_angle
+        return weights @ self.radiance.reshape(-1, 3) / weights.sum(-1, keepdim=True).clamp(min=1e-12)
+
+    def brdf(self, n_dot_v: torch.Tensor, roughness: torch.Tensor) -> torch.Tensor:
+        return lut_lookup(self.lut, n_dot_v, roughness)
+
+
+def _area_mean(values: np.ndarray, environment: Environment, height: int) -> np.ndarray:
+    """(H, W, C) values of an environment's texels averaged by solid angle into height x 2 height bins."""
+    h, w = values.shape[:2]
+    rows, cols = height, 2 * height
+    _, solid_angle = environment.texel_directions()
+    bin_row = (np.arange(h) * rows) // h
+    bin_col = (np.arange(w) * cols) // w
+    bins = (bin_row[:, None] * cols + bin_col[None, :]).ravel()
+    total = np.bincount(bins, solid_angle.ravel(), rows * cols)
+    weighted = values.astype(np.float64) * solid_angle[..., None]
+    mean = np.stack([np.bincount(bins, weighted[..., c].ravel(), rows * cols) for c in range(values.shape[2])], 1)
+    return (mean / np.maximum(total, 1e-12)[:, None]).reshape(rows, cols, values.shape[2])

@@ -1,0 +1,51 @@
+"""The fittable low-resolution lighting: its split-sum terms, its observation and smoothness terms."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from lirm.engine.lighting.capture_lighting import CaptureLighting, CaptureLightingConfig
+from lirm.engine.lighting.panorama_lighting import PanoramaLighting
+from lirm.engine.lighting.split_sum_shading import shade
+from lirm.renderer.environment import Environment
+from lirm.renderer.procedural_environments import make_procedural_environment
+
+
+def test_a_uniform_panorama_lights_every_normal_and_lobe_alike():
+    lighting = PanoramaLighting.from_environment(Environment(np.full((32, 64, 3), 0.7, np.float32)), height=8)
+    normals = torch.nn.functional.normalize(torch.randn(50, 3, generator=torch.Generator().manual_seed(0)), dim=-1)
+    torch.testing.assert_close(lighting.irradiance_over_pi(normals), torch.full((50, 3), 0.7), rtol=0.02, atol=0.0)
+    torch.testing.assert_close(lighting.prefiltered(normals, torch.rand(50)), torch.full((50, 3), 0.7), rtol=1e-4, atol=0.0)
+    white = shade(lighting, torch.ones(50, 3), torch.ones(50), torch.zeros(50), normals, normals).radiance
+    torch.testing.assert_close(white, torch.full((50, 3), 0.7), rtol=0.03, atol=0.0)  # energy conserved, as the renderer
+
+
+def test_the_sun_side_is_brighter_and_gradients_reach_the_light():
+    lighting = PanoramaLighting.from_environment(make_procedural_environment("sky", width=128), height=16)
+    up, down = torch.tensor([[0.0, 0.0, 1.0]]), torch.tensor([[0.0, 0.0, -1.0]])
+    assert (lighting.irradiance_over_pi(up) > 2 * lighting.irradiance_over_pi(down)).all()
+    out = shade(lighting, torch.full((1, 3), 0.5), torch.tensor([0.4]), torch.tensor([0.0]), up, up).radiance
+    out.sum().backward()
+    assert lighting.log_radiance.grad is not None and lighting.log_radiance.grad.abs().sum() > 0
+
+
+def test_what_the_photos_saw_holds_the_panorama_and_clipped_light_is_a_lower_bound():
+    environment = make_procedural_environment("studio", width=64)
+    observed = np.zeros((32, 64))
+    observed[16:] = 3.0  # the lower half seen
+    clipped = np.zeros((32, 64))
+    clipped[24:, :8] = 1.0  # and a corner of it clipped
+    estimate = CaptureLighting(environment, observed, clipped, 4, CaptureLightingConfig(width=64))
+    lighting = PanoramaLighting.from_capture_lighting(estimate, height=8)
+    assert float(lighting.observation_loss().detach()) < 1e-4  # it starts at what was seen
+    with torch.no_grad():
+        lighting.log_radiance[4:, :] -= 1.0  # darker than seen everywhere seen: penalised
+    darker = float(lighting.observation_loss().detach())
+    with torch.no_grad():
+        lighting.log_radiance[4:, :] += 2.0  # brighter: penalised too, except where clipped
+    brighter = float(lighting.observation_loss().detach())
+    assert darker > 0.5 and 0.5 < brighter < darker
+    with torch.no_grad():
+        lighting.log_radiance[:4] = torch.randn(4, 16, 3)
+    assert float(lighting.smoothness_loss().detach()) > 0.1  # unseen, but kept smooth by its own term
