@@ -1,4 +1,4 @@
-"""Field -> .glb: extract and clean the mesh, unwrap it, bake the materials, write the file.
+"""Field -> .glb (or .usdz): extract and clean the mesh, unwrap it, bake the materials, write the file.
 
 `export_field` is what `lirm export` and the app call; every stage reports progress and is timed.
 """
@@ -61,8 +61,8 @@ def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig()
     `world_transform`: a 4x4 from the field's frame to the exported one, or a function of the mesh's
     vertices that returns it (to place the object by its own extent, e.g. standing on the ground)."""
     path = Path(path)
-    if path.suffix.lower() != ".glb":
-        raise LirmUserError(f"{path}: the output must be a .glb file")
+    if path.suffix.lower() not in (".glb", ".usdz"):
+        raise LirmUserError(f"{path}: the output must be a .glb (glTF) or .usdz (Apple AR Quick Look) file")
     _check_writable(path)
     seconds: dict[str, float] = {}
     steps = 6
@@ -97,7 +97,12 @@ def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig()
     textured = TexturedMesh(uv_mesh.positions, uv_mesh.normals, uv_mesh.tangents, uv_mesh.uvs, uv_mesh.faces,
                             textures.base_color_srgb8(), textures.metallic_roughness8(),
                             textures.normal8() if config.normal_map else None)
-    write_glb(path, textured, world_transform)
+    if path.suffix.lower() == ".usdz":
+        from .usdz_writer import write_usdz
+
+        write_usdz(path, textured, world_transform)
+    else:
+        write_glb(path, textured, world_transform)
     if config.obj:
         from .obj_writer import write_obj
 
