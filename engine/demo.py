@@ -46,6 +46,9 @@ class DemoConfig:
     export_faces: int = 20_000
     export_texture: int = 512
     refine_minutes: float | None = 3.0  # per-scene refinement before the export (None: export the LIRM state as is)
+    # The built-in mug stated as a real one (a typical mug's height), so that the demo's exports are
+    # in metres with the base on y = 0, as a user's are after `lirm capture --real-size`.
+    real_height_m: float | None = 0.095
 
 
 @dataclass
@@ -143,9 +146,13 @@ def _reconstruct_and_export(capture_dir: Path, asset_path: Path, config: DemoCon
         say(f"refining the reconstruction on all the views for {config.refine_minutes:g} minutes")
         refined = run_refine(capture_dir, source, refine_preset("default", minutes=config.refine_minutes), render=pictures)
         say(f"refinement: {refined.steps} steps in {refined.seconds:.0f} s from {refined.started_from}")
-    say("exporting the asset (surface, UV atlas, baked PBR textures, .glb)")
+    if config.real_height_m:
+        from .capture.real_size import set_real_size
+
+        set_real_size(capture_dir, "height", config.real_height_m, "lirm demo")
+    say("exporting the asset (surface, UV atlas, baked PBR textures, .glb and .usdz)")
     export = ExportConfig(mesh=replace(MeshExtractionConfig(), resolution=config.export_grid, face_budget=config.export_faces),
-                          texture_size=config.export_texture)
+                          texture_size=config.export_texture, usdz=True)
     result, _ = export_capture(capture_dir, asset_path, export, source=source)
     return result.path, source
 

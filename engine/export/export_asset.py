@@ -30,6 +30,7 @@ class ExportConfig:
     bake: BakeConfig = field(default_factory=BakeConfig)
     normal_map: bool = True
     obj: bool = False  # also write NAME.obj + .mtl + PNGs beside the .glb
+    usdz: bool = False  # also write NAME.usdz beside the .glb (the same mesh and textures)
 
     def __post_init__(self) -> None:
         if not 64 <= self.texture_size <= 4096:
@@ -103,6 +104,10 @@ def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig()
         write_usdz(path, textured, world_transform)
     else:
         write_glb(path, textured, world_transform)
+    if config.usdz and path.suffix.lower() == ".glb":
+        from .usdz_writer import write_usdz
+
+        write_usdz(path.with_suffix(".usdz"), textured, world_transform)
     if config.obj:
         from .obj_writer import write_obj
 

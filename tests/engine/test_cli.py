@@ -195,6 +195,16 @@ def test_demo_photographs_and_captures_a_builtin_object(tmp_path):
     assert report.errors == 0, report.messages
     assert "shipped checkpoint lirm-tiny.safetensors" in out and "about these weights: " in proc.stderr
     assert "UNTRAINED" not in proc.stderr
+    # The built-in mug stated 9.5 cm tall: the glb is in metres, its base on y = 0 (issue 21, cases 8-9),
+    # and the USDZ beside it holds the same mesh and textures (case 11).
+    import trimesh
+
+    from lirm.engine.export.usdz_writer import read_usdz
+
+    mesh = trimesh.load(asset, force="mesh", process=False)
+    assert abs(mesh.bounds[1][1] - mesh.bounds[0][1] - 0.095) < 0.005 and abs(mesh.bounds[0][1]) < 1e-4
+    held = read_usdz(asset.with_suffix(".usdz"))
+    assert held["vertices"] == len(mesh.vertices) and held["textures"] == ["base_color.png", "metallic_roughness.png", "normal.png"]
     relit = cv2.imread(str(tmp_path / "demo" / "relit.png"))
     assert relit is not None and relit.shape[:2] == (4 * 192, 4 * 192) and relit.std() > 10  # 2 assets x 2 HDRIs, 4 sides
     assert "rows, top to bottom: original mug under studio; exported asset under studio" in out
