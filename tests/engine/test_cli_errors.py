@@ -14,6 +14,7 @@ import pytest
 from lirm.engine import cli, resources
 from lirm.engine.capture.capture_folder import Capture
 from lirm.engine.cli import main
+from lirm.engine.commands import export, suggest
 from lirm.engine.errors import LirmUserError
 
 FAST = ["--preset", "tiny", "--novel-views", "1", "--render-size", "24", "--grid-resolution", "48"]
@@ -222,7 +223,7 @@ def test_a_memory_error_all_the_same_names_the_settings_to_lower(capsys, lego_ca
     def out_of_memory(args):
         raise MemoryError()
 
-    monkeypatch.setattr(cli, "_run_export", out_of_memory)
+    monkeypatch.setattr(export, "run", out_of_memory)
     code, err = run(capsys, "export", str(lego_capture), "-o", str(tmp_path / "a.glb"))
     assert code == 4 and "ran out of memory (MemoryError)" in one_sentence(err)
     assert "lower --grid (now 256) or --texture (now 1024)" in err
@@ -234,7 +235,7 @@ def test_an_unexpected_exception_is_a_sentence_and_a_crash_file(capsys, lego_cap
     def broken(args):
         raise RuntimeError("the index went wrong")
 
-    monkeypatch.setattr(cli, "_run_suggest", broken)
+    monkeypatch.setattr(suggest, "run", broken)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     code, err = run(capsys, "suggest", str(lego_capture))
     assert code == cli.EXIT_INTERNAL == 70
@@ -252,6 +253,6 @@ def test_ctrl_c_is_130(capsys, lego_capture, monkeypatch):
     def interrupted(args):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(cli, "_run_suggest", interrupted)
+    monkeypatch.setattr(suggest, "run", interrupted)
     code, err = run(capsys, "suggest", str(lego_capture))
     assert code == 130 and err.strip() == "cancelled"

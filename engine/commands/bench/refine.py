@@ -1,0 +1,69 @@
+"""`lirm bench refine`: refinement quality against its time budget."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ...errors import LirmUsageError
+from ..common import (VIEW_SIZE, bar_updater, heldout_objects, model_with_warning, require_at_least_one, require_range,
+                      view_progress_bar)
+
+
+def add_parser(subparsers) -> None:
+    parser = subparsers.add_parser("refine", help="refinement quality against its time budget (30 s, 1, 3, 10 min) on a held-out set, with peak memory")
+    parser.add_argument("checkpoint", type=Path, nargs="?", help="model weights (default: the shipped checkpoint)")
+    parser.add_argument("--set", choices=("synthetic", "gltf"), default="synthetic", help="held-out set (default synthetic)")
+    parser.add_argument("--objects", type=int, default=4, help="held-out synthetic objects (default 4)")
+    parser.add_argument("--size", type=int, default=128, help="side of the protocol views and of the input crops (default 128)")
+    parser.add_argument("--output-views", type=int, default=6, help="output views scored per object (default 6 of 12)")
+    parser.add_argument("--minutes", type=float, nargs="+", default=[0.5, 1.0, 3.0, 10.0], help="budgets (default 0.5 1 3 10)")
+    parser.add_argument("--init", choices=("lirm", "hull", "scratch"), default="lirm", help="start from (default lirm)")
+    parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                        help="a refinement setting, e.g. losses.eikonal=0, edge_ray_fraction=0, plane_resolutions=(128,); repeatable")
+    parser.add_argument("--models", type=Path, default=Path("../shared/data/pbr_models"), help="glTF folder of the gltf set")
+    parser.add_argument("--environments", type=Path, default=Path("../shared/data/envmaps"), help="HDR folder of the gltf set")
+    parser.add_argument("--warm-start", action="store_true",
+                        help="instead: refining again after new views, cold (from LIRM) for the first --minutes against warm "
+                             "(from the earlier refinement) for 1/4, 1/2 and all of it")
+    parser.add_argument("--json", type=Path, help="also write every object's numbers here")
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ...bench.refine_bench import apply_options, dumps, refine_bench_table, run_refine_bench
+    from ...evaluation.evaluate import EvalConfig
+    from ...io.atomic_files import atomic_write
+    from ...refine.config import refine_preset
+
+    require_at_least_one(args, "objects", "output_views")
+    require_range(args, "size", VIEW_SIZE, " pixels")
+    if any(not m > 0 for m in args.minutes):
+        raise LirmUsageError(f"--minutes must all be positive, got {args.minutes}")
+    source = model_with_warning(args.checkpoint)
+    base = apply_options(refine_preset("default"), args.option)
+    args.updates = 4
+    objects = heldout_objects(args)
+    if args.warm_start:
+        from ...bench.refine_bench import run_warm_start_bench, warm_start_table
+
+        bar = view_progress_bar(len(objects), "warm and cold starts")
+        try:
+            result = run_warm_start_bench(source.model, objects, EvalConfig(output_views=args.output_views), base,
+                                          args.minutes[0], progress=bar_updater(bar))
+        finally:
+            bar.close()
+        table = warm_start_table(result)
+    else:
+        bar = view_progress_bar(len(args.minutes), "refinement budgets")
+        try:
+            result = run_refine_bench(source.model, objects, EvalConfig(output_views=args.output_views), base, args.minutes,
+                                      args.init, progress=bar_updater(bar))
+        finally:
+            bar.close()
+        table = refine_bench_table(result, args.set)
+    result["options"] = args.option
+    print(table)
+    if args.json:
+        atomic_write(args.json, lambda tmp: tmp.write_text(dumps(result), encoding="utf-8"))
+    return 0

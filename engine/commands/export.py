@@ -1,0 +1,80 @@
+"""`lirm export`: a capture's reconstruction as a textured PBR .glb."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .. import progress_events
+from .common import check_export_memory, check_export_options, check_output, require_capture
+
+
+def add_parser(subparsers) -> None:
+    parser = subparsers.add_parser("export", help="the capture's latest reconstruction as a textured PBR .glb")
+    parser.add_argument("capture", type=Path, help="a capture folder with a reconstruction (`lirm reconstruct`)")
+    parser.add_argument("-o", "--out", type=Path, help="the .glb to write (default CAPTURE/export/asset.glb, as the app; "
+                        "replaced only by a complete file)")
+    parser.add_argument("--faces", type=int, default=20_000, help="face budget after decimation (default 20000)")
+    parser.add_argument("--texture", type=int, default=1024, help="texture side in pixels, 64..4096 (default 1024)")
+    parser.add_argument("--grid", type=int, default=256, help="marching-cubes grid per side (default 256)")
+    parser.add_argument("--checkpoint", type=Path, help="the weights the reconstruction was made with (default: as lirm reconstruct)")
+    parser.add_argument("--no-normal-map", action="store_true", help="leave out the tangent-space normal map")
+    parser.add_argument("--obj", action="store_true", help="also write NAME.obj + NAME.mtl + PNG textures beside the .glb")
+    parser.add_argument("--update", type=int, help="export the state after this update (default: the latest)")
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from ..export.capture_export import export_capture
+    from ..export.export_asset import ExportConfig
+    from ..export.field_mesh import MeshExtractionConfig
+
+    check_export_options(args)
+    require_capture(args.capture)
+    if args.out is None:
+        args.out = args.capture / "export" / "asset.glb"
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+    check_output(args.out, "the asset (-o)", make_parents=False, example=f"{args.capture.name or 'asset'}.glb")
+    if args.obj:
+        check_output(args.out.with_suffix(".obj"), "the OBJ copy (--obj)", make_parents=False)
+    check_export_memory(args)
+    config = ExportConfig(mesh=replace(MeshExtractionConfig(), resolution=args.grid, face_budget=args.faces),
+                          texture_size=args.texture, normal_map=not args.no_normal_map, obj=args.obj)
+    result, source = export_capture(args.capture, args.out, config, args.checkpoint,
+                                    progress=_export_progress, update=args.update)
+    if not source.trained:
+        print(f"WARNING: exported from UNTRAINED weights ({source.description}): the asset does not look like the object", file=sys.stderr)
+    elif source.note and not _exports_a_refinement(args.capture, args.update):
+        # The caveat about the shipped weights, as every command that uses them prints it.
+        print(f"about these weights: {source.note}", file=sys.stderr)
+    timings = ", ".join(f"{k} {v:.1f} s" for k, v in result.seconds.items())
+    print(f"{result.path}: {result.faces} faces, {result.vertices} vertices, {result.texture_size}px textures ({timings})")
+    from ..capture.capture_folder import Capture
+
+    real = Capture.open(args.capture).settings.get("real_size")
+    if real:
+        which, metres = next(iter(real.items()))
+        print(f"in metres: the object's {which} is {metres:g} m as stated; its base is on y = 0")
+    else:
+        print(f"note: the scale is arbitrary (the photos' units); give the real size with "
+              f"`lirm capture --real-size height=METRES {args.capture}` to export in metres")
+    return 0
+
+
+def _export_progress(stage: str, done: int, total: int) -> None:
+    progress_events.emit(stage, done, total)
+    print(f"[{done}/{total}] {stage}", file=sys.stderr)
+
+
+def _exports_a_refinement(capture: Path, update: int | None) -> bool:
+    """Whether the step `lirm export` takes is a refinement (fitted to the photos, not the weights' alone)."""
+    from ..capture.capture_folder import Capture
+
+    updates = Capture.open(capture).updates
+    if not updates:
+        return False
+    entry = updates[-1] if update is None or not 1 <= update <= len(updates) else updates[update - 1]
+    return entry.get("kind") == "refine"
