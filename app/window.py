@@ -28,6 +28,11 @@ from .panels.viewport_panel import ViewportPanel
 
 log = logging.getLogger("lirm.app")
 
+# Redraws a second when nothing happens (input wakes the window at once) and while work runs. Every
+# frame redraws the whole window, which costs tens of milliseconds on a software GL (llvmpipe).
+IDLE_FPS = 0.25
+WORKING_FPS = 10.0
+
 
 @dataclass(frozen=True)
 class AppConfig:
@@ -146,6 +151,17 @@ class LirmApp:
         self.jobs.poll()
         if self.script is not None:
             self.script.step()
+        self._set_idling()
+
+    def _set_idling(self) -> None:
+        """Draw only when something changes: an idle window (no input, no job, no field being rendered)
+        sleeps until the next input event or IDLE_FPS times a second at most; while work is under way it
+        redraws at WORKING_FPS so that its progress shows."""
+        from imgui_bundle import hello_imgui
+
+        working = bool(self.jobs.running()) or self.field_preview.busy() or self.script is not None
+        idling = hello_imgui.get_runner_params().fps_idling
+        idling.fps_idle = WORKING_FPS if working else IDLE_FPS
 
     def after_frame(self) -> None:
         if self.first_frame_seconds is None:
@@ -377,7 +393,7 @@ def runner_params(app: LirmApp):
     # The layout is the code's and the user's choices live in the capture: no ini file. (An empty
     # ini_filename is not enough: HelloImGui then names one after the window title, in the cwd.)
     params.ini_disable = True
-    params.fps_idling.fps_idle = 5.0  # an idle window redraws 5 times a second (jobs are polled then): little CPU on llvmpipe
+    params.fps_idling.fps_idle = IDLE_FPS  # see LirmApp._set_idling
 
     def split(new: str, direction, ratio: float, initial: str = "MainDockSpace"):
         s = hello_imgui.DockingSplit()
