@@ -95,15 +95,14 @@ def run(args: argparse.Namespace) -> int:
         print(f"  the replaced masks are kept in {fixed.backup}; `lirm capture --undo-fix-mask {args.capture}` puts them back")
         return 0
     if args.real_size:
-        from ..capture.capture_folder import Capture
+        from ..capture.real_size import parse_real_size, set_real_size
 
         require_capture(Path(args.inputs))
-        which, metres = _parse_real_size(args.real_size)
-        with capture_lock(args.inputs, "lirm capture --real-size"):
-            capture = Capture.open(args.inputs)
-            capture.settings["real_size"] = {which: metres}
-            capture.log("real size", **{which: metres})
-            capture.save()
+        try:
+            which, metres = parse_real_size(args.real_size)
+        except ValueError as err:
+            raise LirmUsageError(f"--real-size {err}") from None
+        set_real_size(args.inputs, which, metres)
         print(f"{args.inputs}: the object is {metres:g} m {'tall' if which == 'height' else 'wide'}; exports are in metres from now on")
         return 0
     if args.check or args.resume:
@@ -144,16 +143,3 @@ def run(args: argparse.Namespace) -> int:
             bar.close()
     print(format_capture_report(summary, reference=args.reference))
     return 0 if summary.reconstructable else 1
-
-
-def _parse_real_size(text: str) -> tuple[str, float]:
-    """'height=0.095', 'width=12cm', 'height=95 mm' -> ('height', metres)."""
-    import re
-
-    match = re.fullmatch(r"\s*(height|width)\s*=\s*([0-9]*\.?[0-9]+)\s*(m|cm|mm)?\s*", text)
-    if not match:
-        raise LirmUsageError(f"--real-size {text!r}: write height=METRES or width=METRES (e.g. height=0.095 or height=9.5cm)")
-    value = float(match.group(2)) * {"m": 1.0, "cm": 0.01, "mm": 0.001, None: 1.0}[match.group(3)]
-    if not 0.001 <= value <= 100.0:
-        raise LirmUsageError(f"--real-size {text!r}: {value:g} m is outside 1 mm..100 m")
-    return match.group(1), value

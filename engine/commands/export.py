@@ -1,4 +1,4 @@
-"""`lirm export`: a capture's reconstruction as a textured PBR .glb."""
+"""`lirm export`: a capture's reconstruction as a textured PBR .glb (or .usdz)."""
 
 from __future__ import annotations
 
@@ -13,14 +13,15 @@ from .common import check_export_memory, check_export_options, check_output, req
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser("export", help="the capture's latest reconstruction as a textured PBR .glb")
     parser.add_argument("capture", type=Path, help="a capture folder with a reconstruction (`lirm reconstruct`)")
-    parser.add_argument("-o", "--out", type=Path, help="the .glb to write (default CAPTURE/export/asset.glb, as the app; "
-                        "replaced only by a complete file)")
+    parser.add_argument("-o", "--out", type=Path, help="the .glb (or .usdz, for Apple's AR Quick Look) to write (default "
+                        "CAPTURE/export/asset.glb, as the app; replaced only by a complete file)")
     parser.add_argument("--faces", type=int, default=20_000, help="face budget after decimation (default 20000)")
     parser.add_argument("--texture", type=int, default=1024, help="texture side in pixels, 64..4096 (default 1024)")
     parser.add_argument("--grid", type=int, default=256, help="marching-cubes grid per side (default 256)")
     parser.add_argument("--checkpoint", type=Path, help="the weights the reconstruction was made with (default: as lirm reconstruct)")
     parser.add_argument("--no-normal-map", action="store_true", help="leave out the tangent-space normal map")
     parser.add_argument("--obj", action="store_true", help="also write NAME.obj + NAME.mtl + PNG textures beside the .glb")
+    parser.add_argument("--usdz", action="store_true", help="also write NAME.usdz beside the .glb (the same mesh and textures)")
     parser.add_argument("--update", type=int, help="export the state after this update (default: the latest)")
     parser.set_defaults(run=run)
 
@@ -40,9 +41,12 @@ def run(args: argparse.Namespace) -> int:
     check_output(args.out, "the asset (-o)", make_parents=False, example=f"{args.capture.name or 'asset'}.glb")
     if args.obj:
         check_output(args.out.with_suffix(".obj"), "the OBJ copy (--obj)", make_parents=False)
+    if args.usdz and args.out.suffix.lower() == ".glb":
+        check_output(args.out.with_suffix(".usdz"), "the USDZ copy (--usdz)", make_parents=False)
     check_export_memory(args)
     config = ExportConfig(mesh=replace(MeshExtractionConfig(), resolution=args.grid, face_budget=args.faces),
-                          texture_size=args.texture, normal_map=not args.no_normal_map, obj=args.obj)
+                          texture_size=args.texture, normal_map=not args.no_normal_map, obj=args.obj,
+                          usdz=args.usdz)
     result, source = export_capture(args.capture, args.out, config, args.checkpoint,
                                     progress=_export_progress, update=args.update)
     if not source.trained:

@@ -30,3 +30,19 @@ def test_usdz_holds_the_glbs_mesh_and_textures_and_passes_the_checker(tmp_path, 
         assert archive.namelist()[0].endswith(".usdc")  # the root layer first, as AR Quick Look requires
     assert np.array_equal(packed[..., ::-1], usdz.textures.base_color_srgb8())
     assert check_usdz(usdz.path) == []
+
+
+def test_lirm_export_writes_a_usdz_by_its_name_and_beside_a_glb(lego_capture, tmp_path, capsys):
+    import shutil
+
+    from lirm.engine.cli import main
+
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    assert main(["reconstruct", str(capture), "--updates", "1", "--novel-views", "1", "--render-size", "24",
+                 "--grid-resolution", "48"]) == 0
+    small = ["--faces", "800", "--texture", "64", "--grid", "48"]
+    assert main(["export", str(capture), "-o", str(tmp_path / "a.usdz"), *small]) == 0
+    assert main(["export", str(capture), "-o", str(tmp_path / "b.glb"), "--usdz", *small]) == 0
+    assert read_usdz(tmp_path / "a.usdz")["faces"] > 0 and (tmp_path / "b.usdz").is_file()
+    assert check_usdz(tmp_path / "b.usdz") == []
