@@ -110,19 +110,36 @@ class AppActions:
                            ["capture", str(self.state.capture_dir), "--real-size", f"height={height_m:g}"],
                            lambda job: self._after_capture_job(job, "setting the real size"))
 
+    def new_project(self, inputs: str | Path, new_capture: str | Path | None = None) -> Job | None:
+        """File > New project from photos: a new capture from a folder of photos or a video (at
+        `new_capture`, default a fresh folder beside the photos), opened when it is made, whatever
+        capture is open now."""
+        target = Path(new_capture) if new_capture else fresh_capture_folder(Path(inputs))
+        return self.import_photos(inputs, target)
+
+    def add_photos(self, inputs: str | Path) -> Job | None:
+        """File > Add photos: more photos into the open capture (`lirm capture --add`)."""
+        if self.state.capture_dir is None:
+            self.state.say("no capture is open to add photos to: use File > New project from photos", "warning")
+            return None
+        return self.import_photos(inputs)
+
     def import_photos(self, inputs: str | Path, new_capture: str | Path | None = None) -> Job | None:
         """A folder of photos or a video: a new capture (at `new_capture`, default beside the photos),
         or added to the open one."""
         inputs = str(inputs)
-        if self.state.capture_dir is not None and new_capture is None:
+        adding = self.state.capture_dir is not None and new_capture is None
+        if adding:
             args = ["capture", inputs, str(self.state.capture_dir), "--add"]
             target = self.state.capture_dir
         else:
-            target = Path(new_capture) if new_capture else Path(inputs).with_name(Path(inputs).stem + "_capture")
+            target = Path(new_capture) if new_capture else fresh_capture_folder(Path(inputs))
             args = ["capture", inputs, "-o", str(target)]
 
         def done(job: Job) -> None:
             if job.state == "finished":
+                if adding and any("nothing new was added" in line for line in job.output):
+                    self.state.say(f"{inputs}: every photo is already in {target} (or was skipped): nothing new was added", "warning")
                 self.open_capture(target)
             elif job.state == "failed":
                 self.state.say(f"importing {inputs} failed: {job.error_text()}", "error")
@@ -452,3 +469,12 @@ class AppActions:
     def cancel(self, kind: str) -> None:
         for job in self.jobs.running(kind):
             self.jobs.cancel(job)
+
+
+def fresh_capture_folder(inputs: Path) -> Path:
+    """PHOTOS_capture beside the photos, or PHOTOS_capture_2, _3, ... when that is taken."""
+    base = inputs.with_name(inputs.stem + "_capture")
+    candidate, k = base, 2
+    while candidate.exists():
+        candidate, k = base.with_name(f"{base.name}_{k}"), k + 1
+    return candidate

@@ -59,8 +59,10 @@ class LirmApp:
         self.viewport = None
         self.ctx = None
         from .field_preview import FieldPreview
+        from .panels.file_menu import FileMenu
 
         self.field_preview = FieldPreview()
+        self.file_menu = FileMenu(self)
         self.user_environments: list[str] = list(config.extra_environments)
         self.capture_cameras, self.suggested_cameras = [], []
         self.world_from_capture: np.ndarray | None = None
@@ -195,8 +197,18 @@ class LirmApp:
         if self.viewport is not None:
             self.viewport.release()
 
+    def show_menus(self) -> None:
+        self.file_menu.draw_menu()
+
     def show_gui(self) -> None:
         from imgui_bundle import hello_imgui, imgui
+
+        io = imgui.get_io()
+        if io.key_ctrl and imgui.is_key_pressed(imgui.Key.n, False):
+            self.file_menu.ask("new")
+        elif io.key_ctrl and imgui.is_key_pressed(imgui.Key.o, False):
+            self.file_menu.ask("open")
+        self.file_menu.draw_dialogs()
 
         if self._exit_asked:
             imgui.open_popup("Work under way")
@@ -390,6 +402,9 @@ def runner_params(app: LirmApp):
     params.app_window_params.window_geometry.size = (app.config.width, app.config.height)
     params.imgui_window_params.default_imgui_window_type = hello_imgui.DefaultImGuiWindowType.provide_full_screen_dock_space
     params.imgui_window_params.show_status_bar = False
+    params.imgui_window_params.show_menu_bar = True
+    params.imgui_window_params.show_menu_app = False  # File is ours; the window's own close button quits
+    params.imgui_window_params.show_menu_view = False
     # The layout is the code's and the user's choices live in the capture: no ini file. (An empty
     # ini_filename is not enough: HelloImGui then names one after the window title, in the cwd.)
     params.ini_disable = True
@@ -420,6 +435,7 @@ def runner_params(app: LirmApp):
     params.callbacks.post_init = app.post_init
     params.callbacks.pre_new_frame = app.pre_new_frame
     params.callbacks.show_gui = app.show_gui
+    params.callbacks.show_menus = app.show_menus
     params.callbacks.after_swap = app.after_frame
     params.callbacks.before_swap = app.before_swap
     params.callbacks.confirm_exit = app.confirm_exit

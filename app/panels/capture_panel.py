@@ -35,7 +35,12 @@ class CapturePanel:
             job_progress(job, app.jobs.cancel)
         imgui.separator()
         if state.capture_dir is None:
-            imgui.text_wrapped("No capture open. Open a folder made by `lirm capture`, import photos, or start from the demo capture.")
+            making = app.jobs.running("capture")
+            if making:  # e.g. `lirm app --demo` building its capture: say what is happening, not "nothing"
+                imgui.text_wrapped(f"{making[0].title}: it opens here when it is ready.")
+            else:
+                imgui.text_wrapped("No capture open. Use File > New project from photos or Open capture (or the "
+                                   "field above), or start from the demo capture.")
             return
         imgui.text_wrapped(str(state.capture_dir))
         posed = sum(f.posed for f in state.frames)
