@@ -108,7 +108,12 @@ class AppActions:
             return None
         return self._start("capture", f"setting the height to {height_m:g} m",
                            ["capture", str(self.state.capture_dir), "--real-size", f"height={height_m:g}"],
-                           lambda job: self._after_capture_job(job, "setting the real size"))
+                           lambda job: self._after_real_size(job))
+
+    def _after_real_size(self, job: Job) -> None:
+        self._after_capture_job(job, "setting the real size")
+        if job.state == "finished" and self.state.viewing_update:
+            self._show_update(self.state.viewing_update)  # the preview again, in metres
 
     def new_project(self, inputs: str | Path, new_capture: str | Path | None = None) -> Job | None:
         """File > New project from photos: a new capture from a folder of photos or a video (at
@@ -318,8 +323,12 @@ class AppActions:
             self.state.preview_asset = None
             self._notify("asset")
             return
+        from lirm.engine.export.glb_placement import read_units
+
         path = self.preview_path(update)
-        if path.is_file() and path.stat().st_mtime >= (self.state.capture_dir / self.state.updates[update - 1]["state"]).stat().st_mtime:
+        units = "metres" if self.state.real_size else "capture units"
+        if (path.is_file() and read_units(path) == units
+                and path.stat().st_mtime >= (self.state.capture_dir / self.state.updates[update - 1]["state"]).stat().st_mtime):
             self.state.preview_asset = path
             self._notify("asset")
             return

@@ -54,7 +54,8 @@ class ScriptRunner:
         self.result["first_frame_seconds"] = self.app.first_frame_seconds
         viewport = self.app.viewport
         self.result["viewport"] = {"channel": self.app.state.choices.view.channel, "environment_listed": self.app.state.choices.view.environment,
-                                   "environment_lit": None if viewport is None else viewport.environment_key}
+                                   "environment_lit": None if viewport is None else viewport.environment_key,
+                                   "scale_bar": next((p.scale_label for p in self.app.panels if hasattr(p, "scale_label")), "")}
         (self.out / "script_result.json").write_text(json.dumps(self.result, indent=1))
 
     def step(self) -> None:

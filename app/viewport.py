@@ -70,6 +70,7 @@ class Viewport:
         self.scene = None
         self.bounds = np.array([[-0.5, -0.5, -0.5], [0.5, 0.5, 0.5]])
         self.asset_path: Path | None = None
+        self.asset_stamp: int | None = None  # the shown file's mtime: a file rewritten in place is shown again
         self._maps = None
         self.environment_key = None
         self.texture: moderngl.Texture | None = None
@@ -88,6 +89,7 @@ class Viewport:
             self.scene.release()
             self.scene = None
         self.asset_path = path
+        self.asset_stamp = path.stat().st_mtime_ns if path is not None and Path(path).is_file() else None
         if meshes is None and path is not None:
             meshes = load_model(path).meshes
         if meshes:

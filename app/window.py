@@ -262,10 +262,16 @@ class LirmApp:
             self.viewport.set_asset(None, meshes=[self._coverage_mesh()], frame=self.viewport.scene is None)
             return
         path = self.state.preview_asset
-        if path == self.viewport.asset_path and self.viewport.scene is not None:
+        stamp = path.stat().st_mtime_ns if path is not None and path.is_file() else None
+        if path == self.viewport.asset_path and stamp == self.viewport.asset_stamp and self.viewport.scene is not None:
             return
+        from lirm.engine.export.glb_placement import read_units
+
+        units = read_units(path) if path is not None else None
+        reframe = self.viewport.scene is None or units != getattr(self, "_asset_units", units)  # e.g. now in metres
+        self._asset_units = units
         try:
-            self.viewport.set_asset(path, frame=self.viewport.scene is None)
+            self.viewport.set_asset(path, frame=reframe)
         except Exception as err:  # a damaged preview must not take the window down
             self.state.say(f"cannot show {path}: {err}", "error")
             return

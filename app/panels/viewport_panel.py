@@ -9,6 +9,7 @@ from lirm.app.viewport import frustum_lines
 from lirm.renderer.pbr_renderer import DISPLAY_CHANNELS
 
 from .common import COLOURS
+from .viewport_guides import draw_axis_gizmo, draw_grid, draw_help, draw_scale_bar
 
 BACKDROP = 0.18  # the viewport's empty grey (viewport.py clears to it)
 INPUT_COLOUR = imgui.IM_COL32(120, 200, 255, 200)
@@ -22,6 +23,9 @@ class ViewportPanel:
         self.app = app
         self._field_size = None
         self._field_shown = None
+        self.show_guides = True  # ground grid, axis gizmo, scale bar
+        self.show_help = False
+        self.scale_label = ""  # what the scale bar said last (tests read it)
 
     def draw(self) -> None:
         app, state = self.app, self.app.state
@@ -37,6 +41,11 @@ class ViewportPanel:
         changed, show = imgui.checkbox("cameras", view.show_cameras)
         if changed:
             app.actions.set_show_cameras(show)
+        imgui.same_line()
+        _, self.show_guides = imgui.checkbox("guides", self.show_guides)
+        imgui.same_line()
+        if imgui.small_button("?") or imgui.is_key_pressed(imgui.Key.f1, False):
+            self.show_help = not self.show_help
         if viewport.frame_times:  # (none yet when a reopened capture starts on the field channel)
             imgui.same_line()
             imgui.text(f"{1000 * viewport.last_render_seconds:.0f} ms")
@@ -55,6 +64,10 @@ class ViewportPanel:
         self._mouse(width, height)
         if view.show_cameras and app.world_from_capture is not None:
             self._frusta(origin, width, height)
+        if self.show_guides and view.channel != "field":
+            self._guides(origin, width, height)
+        if self.show_help:
+            draw_help(imgui.get_window_draw_list(), origin, width)
         if state.capture_dir is not None and state.preview_asset is None and not state.updates:
             notes.append(("No reconstruction yet: pick views in Capture and run an update.", "info"))
         self._overlay(origin, width, notes)
@@ -125,6 +138,27 @@ class ViewportPanel:
             moved = True
         if moved:
             self.app.viewport.dirty = True
+
+    def _guides(self, origin, width: int, height: int) -> None:
+        viewport = self.app.viewport
+        camera = viewport.orbit.camera(width, height)
+        draw = imgui.get_window_draw_list()
+        draw.push_clip_rect(imgui.ImVec2(origin.x, origin.y), imgui.ImVec2(origin.x + width, origin.y + height), True)
+        draw_grid(draw, origin, camera, viewport.bounds, width, height)
+        draw_axis_gizmo(draw, origin, camera, height)
+        self.scale_label = draw_scale_bar(draw, origin, camera, viewport.orbit.target, width, height,
+                                          metres=self._shown_in_metres())
+        draw.pop_clip_rect()
+
+    def _shown_in_metres(self) -> bool:
+        """Whether the asset on screen was exported in metres (its file says so; read once per file)."""
+        from lirm.engine.export.glb_placement import read_units
+
+        path = self.app.state.preview_asset
+        key = None if path is None or not path.is_file() else (str(path), path.stat().st_mtime_ns)
+        if key != getattr(self, "_units_key", "unread"):
+            self._units_key, self._in_metres = key, key is not None and read_units(path) == "metres"
+        return self._in_metres
 
     def _frusta(self, origin, width: int, height: int) -> None:
         app = self.app

@@ -103,4 +103,5 @@ def export_capture(capture_dir: str | Path, out_path: str | Path, config: Export
     def placement(vertices: np.ndarray) -> np.ndarray:
         return standing_on_the_ground(in_metres(transform, vertices, real_size), vertices)
 
-    return export_field(field, out_path, config, placement, progress), source
+    units = "metres" if real_size else "capture units"
+    return export_field(field, out_path, config, placement, progress, units=units), source

@@ -57,7 +57,7 @@ def _check_writable(path: Path) -> None:
 
 def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig(),
                  world_transform: np.ndarray | Callable[[np.ndarray], np.ndarray] | None = None,
-                 progress: Progress | None = None, context=None) -> ExportResult:
+                 progress: Progress | None = None, context=None, units: str | None = None) -> ExportResult:
     """`context`: a moderngl context to rasterise with (a headless one is made when None).
     `world_transform`: a 4x4 from the field's frame to the exported one, or a function of the mesh's
     vertices that returns it (to place the object by its own extent, e.g. standing on the ground)."""
@@ -103,7 +103,7 @@ def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig()
 
         write_usdz(path, textured, world_transform)
     else:
-        write_glb(path, textured, world_transform)
+        write_glb(path, textured, world_transform, units)
     if config.usdz and path.suffix.lower() == ".glb":
         from .usdz_writer import write_usdz
 

@@ -12,23 +12,39 @@ from pathlib import Path
 import numpy as np
 
 EXTRAS_KEY = "lirm_world_from_field"
+UNITS_KEY = "lirm_units"  # "metres" (the capture has a real size) or "capture units" (arbitrary)
 
 
 def read_placement(path: str | Path) -> np.ndarray | None:
     """The recorded 4x4, or None for a file without one (another tool's glb, an .obj, a damaged file)."""
+    extras = _scene_extras(path)
+    try:
+        matrix = np.asarray(extras[EXTRAS_KEY], dtype=np.float64)
+    except (KeyError, ValueError, TypeError):
+        return None
+    return matrix if matrix.shape == (4, 4) and np.isfinite(matrix).all() else None
+
+
+def read_units(path: str | Path) -> str | None:
+    """What one unit of the file is, as recorded ("metres", "capture units"), or None."""
+    units = _scene_extras(path).get(UNITS_KEY)
+    return units if isinstance(units, str) else None
+
+
+def _scene_extras(path: str | Path) -> dict:
     path = Path(path)
     if path.suffix.lower() != ".glb" or not path.is_file():
-        return None
+        return {}
     try:
         with open(path, "rb") as f:
             header = f.read(20)
             if len(header) < 20 or header[:4] != b"glTF":
-                return None
+                return {}
             length, kind = struct.unpack("<II", header[12:20])
             if kind != 0x4E4F534A:  # "JSON"
-                return None
+                return {}
             gltf = json.loads(f.read(length))
-        matrix = np.asarray(gltf["scenes"][gltf.get("scene", 0)]["extras"][EXTRAS_KEY], dtype=np.float64)
+        extras = gltf["scenes"][gltf.get("scene", 0)]["extras"]
     except (OSError, ValueError, KeyError, IndexError, TypeError):
-        return None
-    return matrix if matrix.shape == (4, 4) and np.isfinite(matrix).all() else None
+        return {}
+    return extras if isinstance(extras, dict) else {}

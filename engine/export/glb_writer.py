@@ -21,7 +21,7 @@ from lirm.engine.errors import LirmUserError
 from lirm.engine.io.atomic_files import atomic_write
 from lirm.engine.io.images import encode_png
 
-from .glb_placement import EXTRAS_KEY
+from .glb_placement import EXTRAS_KEY, UNITS_KEY
 
 Z_UP_TO_Y_UP = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0, -1.0, 0, 0], [0, 0, 0, 1.0]])
 
@@ -68,7 +68,7 @@ def _unit(v: np.ndarray, fallback: np.ndarray) -> np.ndarray:
     return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-12)
 
 
-def glb_bytes(mesh: TexturedMesh, world_transform: np.ndarray | None = None) -> bytes:
+def glb_bytes(mesh: TexturedMesh, world_transform: np.ndarray | None = None, units: str | None = None) -> bytes:
     positions, normals, tangents = to_gltf_frame(mesh, world_transform)
     blob = bytearray()
     views: list[dict] = []
@@ -117,8 +117,10 @@ def glb_bytes(mesh: TexturedMesh, world_transform: np.ndarray | None = None) -> 
         "scene": 0,
         # The similarity from the field's frame (the capture's normalised one) to this file's (before
         # the +Z -> +Y turn): lets a viewer draw the capture's cameras where the asset is.
+        # And what one unit of the file is ("metres" when the capture has a real size).
         "scenes": [{"nodes": [0], "extras": {EXTRAS_KEY: (
-            np.eye(4) if world_transform is None else np.asarray(world_transform, np.float64)).round(9).tolist()}}],
+            np.eye(4) if world_transform is None else np.asarray(world_transform, np.float64)).round(9).tolist(),
+            **({UNITS_KEY: units} if units else {})}}],
         "nodes": [{"mesh": 0, "name": mesh.name}],
         "meshes": [{"name": mesh.name, "primitives": [{"attributes": attributes, "indices": indices, "material": 0, "mode": 4}]}],
         "materials": [material],
@@ -139,11 +141,11 @@ def glb_bytes(mesh: TexturedMesh, world_transform: np.ndarray | None = None) -> 
             + struct.pack("<II", len(blob), 0x004E4942) + bytes(blob))
 
 
-def write_glb(path: str | Path, mesh: TexturedMesh, world_transform: np.ndarray | None = None) -> Path:
+def write_glb(path: str | Path, mesh: TexturedMesh, world_transform: np.ndarray | None = None, units: str | None = None) -> Path:
     path = Path(path)
     if path.suffix.lower() != ".glb":
         raise LirmUserError(f"{path}: the output must be a .glb file")
-    data = glb_bytes(mesh, world_transform)
+    data = glb_bytes(mesh, world_transform, units)
     try:
         return atomic_write(path, lambda tmp: tmp.write_bytes(data))
     except OSError as err:

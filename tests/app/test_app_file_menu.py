@@ -28,11 +28,12 @@ def test_new_project_add_photos_and_recent_from_the_file_menu(lego_capture, shar
     photos.mkdir()
     for p in sorted((shared_data / "real_instantngp_fox" / "images").glob("*.jpg"))[:8]:
         shutil.copy(p, photos / p.name)
-    clicked = tmp_path / "clicked"
+    clicked, helped = tmp_path / "clicked", tmp_path / "helped"
     script = {"out": str(tmp_path / "out"), "steps": [
         {"frames": 2}, {"action": "open_capture", "args": [str(capture)]}, {"frames": 2},
         {"report_widgets": True},
         {"wait_file": str(clicked), "timeout": 120}, {"frames": 3}, {"screenshot": "file_menu"},
+        {"wait_file": str(helped), "timeout": 120}, {"frames": 3}, {"screenshot": "help"},
         {"action": "new_project", "args": [str(photos)]}, {"wait": "jobs", "timeout": 500}, {"screenshot": "new_project"},
         {"action": "add_photos", "args": [str(photos)]}, {"wait": "jobs", "timeout": 300},
         {"quit": True}]}
@@ -50,6 +51,13 @@ def test_new_project_add_photos_and_recent_from_the_file_menu(lego_capture, shar
         subprocess.run(["xdotool", "mousemove", "--window", window[0], "22", "9", "click", "1"], env=env, check=True)
         time.sleep(1.5)
         clicked.write_text("")
+        time.sleep(2.0)
+        # Close the menu, then F1: the viewport's help overlay (issue 21, case 7).
+        subprocess.run(["xdotool", "key", "--window", window[0], "Escape"], env=env, check=True)
+        time.sleep(0.5)
+        subprocess.run(["xdotool", "mousemove", "--window", window[0], "680", "400", "key", "F1"], env=env, check=True)
+        time.sleep(1.5)
+        helped.write_text("")
         output, _ = proc.communicate(timeout=900)
     finally:
         if proc.poll() is None:
@@ -60,6 +68,9 @@ def test_new_project_add_photos_and_recent_from_the_file_menu(lego_capture, shar
     # The click opened the File menu: its items are drawn under the menu bar.
     menu = cv2.imread(result["screenshots"]["file_menu"])[20:200, :320].astype(int)
     assert menu.std() > 10
+    # F1 put the controls over the viewport's top-right corner (dark box, light text).
+    before, after = (cv2.imread(result["screenshots"][name])[90:260, 700:1020].astype(int) for name in ("file_menu", "help"))
+    assert np.abs(before - after).mean() > 10
     # New project: a new capture beside the photos, opened, while the lego capture stays as it was.
     new = tmp_path / "fox_capture"
     assert (new / "capture.json").is_file()

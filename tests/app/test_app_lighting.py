@@ -39,7 +39,10 @@ def test_the_capture_lighting_is_offered_and_lights_the_viewport(lego_capture, t
         {"action": "select_views", "args": [views[:4]]}, {"action": "run_update"}, {"wait": "jobs"},
         {"action": "set_environment", "args": ["studio"]}, {"frames": 3}, {"screenshot": "studio"},
         {"action": "set_environment", "args": [panorama]}, {"frames": 3}, {"screenshot": "as_photographed"},
-        {"report_widgets": True}, {"quit": True}]}
+        {"report_widgets": True},
+        {"action": "set_real_size", "args": [0.2]}, {"wait": "jobs"}, {"frames": 3}, {"wait": "jobs"}, {"frames": 3},
+        {"screenshot": "real_size"},
+        {"quit": True}]}
     (tmp_path / "script.json").write_text(json.dumps(script))
     env = dict(os.environ, DISPLAY=x_display, XDG_CONFIG_HOME=str(tmp_path / "config"))
     proc = subprocess.run([sys.executable, "-m", "lirm.engine.cli", "app", "--new", "--script", str(tmp_path / "script.json")],
@@ -48,6 +51,11 @@ def test_the_capture_lighting_is_offered_and_lights_the_viewport(lego_capture, t
     result = json.loads((tmp_path / "out" / "script_result.json").read_text())
     assert result["errors"] == [], result["errors"]
     assert result["viewport"]["environment_lit"] == panorama
+    # Viewport guides (issue 21, case 7): with the real height stated, the scale bar is in real units.
+    value, unit = result["viewport"]["scale_bar"].split()
+    metres = float(value) * {"m": 1.0, "cm": 0.01, "mm": 0.001}[unit]
+    assert 0.01 <= metres <= 0.1, result["viewport"]  # a round length shorter than the 20 cm object that fills the view
+
     assert not [m for m in result["messages"] if m["level"] == "error"], result["messages"]
     x0, y0, x1, y1 = (int(round(v)) for v in result["widgets"]["viewport"])
     studio, photographed = (cv2.imread(result["screenshots"][name])[y0 + 2:y1 - 2, x0 + 2:x1 - 2].astype(int)
