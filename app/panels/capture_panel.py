@@ -52,7 +52,14 @@ class CapturePanel:
             used = {f for u in state.updates for f in u["frames"]}
             actions.select_views([f.frame_id for f in state.frames if f.prepared and f.frame_id not in used])
         flags = imgui.TableFlags_.borders_inner_h | imgui.TableFlags_.scroll_y | imgui.TableFlags_.row_bg
-        if imgui.begin_table("views", 6, flags, imgui.ImVec2(0, 0)):
+        # The table scrolls; with a view opened for its mask, it leaves room for the mask editor below it
+        # (which was drawn under the panel's visible part).
+        table_height = 0.0
+        if self.inspected is not None:
+            avail = imgui.get_content_region_avail()
+            editor = min(avail.x * 0.75, 0.55 * avail.y) + 3.5 * imgui.get_frame_height_with_spacing()  # the image, a line, buttons
+            table_height = max(4.0 * imgui.get_frame_height_with_spacing(), avail.y - editor)
+        if imgui.begin_table("views", 6, flags, imgui.ImVec2(0, table_height)):
             # The name takes the room left; the other columns fit their content (names are cut at the
             # panel's edge, their tooltip has them whole).
             fixed, stretch = imgui.TableColumnFlags_.width_fixed, imgui.TableColumnFlags_.width_stretch
@@ -96,8 +103,14 @@ class CapturePanel:
             return
         texture, scale = shown
         imgui.separator()
+        if imgui.small_button("Close"):
+            self.inspected, self.box = None, None
+            return
+        imgui.same_line()
         imgui.text(f"{frame_id}: drag a box round the object to redo its mask")
-        width = imgui.get_content_region_avail().x
+        avail = imgui.get_content_region_avail()
+        room = max(avail.y - 2.0 * imgui.get_frame_height_with_spacing(), 60.0)  # the image fits above the button
+        width = min(avail.x, room * texture.width / texture.height)
         height = width * texture.height / texture.width
         origin = imgui.get_cursor_screen_pos()
         imgui.image(imgui.ImTextureRef(texture.glo), imgui.ImVec2(width, height))
