@@ -91,3 +91,29 @@ def test_a_cancelled_refinement_leaves_the_history_as_it_was(capture):
         run_refine(capture, source, config, progress=cancel_in_the_middle)
     assert (capture / "capture.json").read_text() == before
     assert not list((capture / "reconstruction").glob(".building_*")) and not (capture / "reconstruction" / "update_02").exists()
+
+
+@pytest.mark.slow
+def test_refine_with_materials_fits_them_under_the_capture_lighting(capture, capsys):
+    """`lirm refine --materials` (issue 19): from a quarter of the budget on, the PBR term is in the
+    loss and falls, and the fitted lighting is saved beside the state; without a lighting estimate
+    the refinement says so and fits as before."""
+    import numpy as np
+
+    from lirm.engine.lighting.capture_lighting import CaptureLighting, CaptureLightingConfig
+    from lirm.renderer.procedural_environments import make_procedural_environment
+
+    steps = ["--iterations", "60", "--novel-views", "1", "--render-size", "24", "--init", "hull"]
+    assert main(["refine", str(capture), "--materials"] + steps) == 0
+    record = json.loads((capture / "reconstruction" / "update_01" / "refine.json").read_text())
+    assert any("no lighting estimate" in note for note in record["notes"])
+    observed = np.zeros((64, 128))
+    observed[32:] = 5  # the lower half seen, as a capture's backgrounds see it
+    CaptureLighting(make_procedural_environment("studio", width=128), observed, np.zeros((64, 128)), 8,
+                    CaptureLightingConfig()).save(capture)
+    assert main(["refine", str(capture), "--materials"] + steps) == 0
+    step = capture / "reconstruction" / "update_02"
+    record = json.loads((step / "refine.json").read_text())
+    pbr = [entry["pbr"] for entry in record["losses"] if "pbr" in entry]
+    assert len(pbr) >= 2 and pbr[-1] < pbr[0], record["losses"]
+    assert (step / "lighting.hdr").is_file() and (step / "lighting.png").is_file()
