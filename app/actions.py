@@ -403,6 +403,10 @@ class AppActions:
         self.state.choices.view.show_cameras = bool(on)
         self._changed_view()
 
+    def set_show_guides(self, on: bool) -> None:
+        self.state.choices.view.show_guides = bool(on)
+        self._changed_view()
+
     def set_show_coverage(self, on: bool) -> None:
         self.state.choices.view.show_coverage = bool(on)
         self._changed_view("asset")

@@ -48,6 +48,7 @@ class ViewSettings:
     background: bool = True
     show_cameras: bool = True
     show_coverage: bool = False
+    show_guides: bool = True  # ground grid, axis gizmo, scale bar
 
 
 @dataclass
@@ -205,6 +206,7 @@ class AppState:
         v.background = take(view, "background", "background switch", _bool, dv.background)
         v.show_cameras = take(view, "show_cameras", "cameras switch", _bool, dv.show_cameras)
         v.show_coverage = take(view, "show_coverage", "coverage switch", _bool, dv.show_coverage)
+        v.show_guides = take(view, "show_guides", "guides switch", _bool, dv.show_guides)
         export = take(data, "export", "export settings", _section, {})
         e, de = out.export, defaults.export
 

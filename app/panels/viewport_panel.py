@@ -23,7 +23,6 @@ class ViewportPanel:
         self.app = app
         self._field_size = None
         self._field_shown = None
-        self.show_guides = True  # ground grid, axis gizmo, scale bar
         self.show_help = False
         self.scale_label = ""  # what the scale bar said last (tests read it)
 
@@ -42,7 +41,9 @@ class ViewportPanel:
         if changed:
             app.actions.set_show_cameras(show)
         imgui.same_line()
-        _, self.show_guides = imgui.checkbox("guides", self.show_guides)
+        changed, guides = imgui.checkbox("guides", view.show_guides)
+        if changed:
+            app.actions.set_show_guides(guides)
         imgui.same_line()
         if imgui.small_button("?") or imgui.is_key_pressed(imgui.Key.f1, False):
             self.show_help = not self.show_help
@@ -64,7 +65,7 @@ class ViewportPanel:
         self._mouse(width, height)
         if view.show_cameras and app.world_from_capture is not None:
             self._frusta(origin, width, height)
-        if self.show_guides and view.channel != "field":
+        if view.show_guides and view.channel != "field":
             self._guides(origin, width, height)
         if self.show_help:
             draw_help(imgui.get_window_draw_list(), origin, width)

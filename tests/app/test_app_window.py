@@ -59,7 +59,7 @@ def test_a_whole_session_in_the_window(tmp_path, x_display):
     script = {"steps": [
         {"frames": 3}, {"screenshot": "01_empty"},
         {"action": "open_demo_capture"}, {"wait": "jobs", "timeout": 400},
-        {"action": "set_background", "args": [False]},
+        {"action": "set_background", "args": [False]}, {"action": "set_show_guides", "args": [False]},
         {"screenshot": "02_opened"},
         {"action": "run_update"}, {"wait": "jobs"}, {"screenshot": "03_update1"},
         {"report_widgets": True},
