@@ -78,11 +78,7 @@ class CaptureLighting:
     def save(self, capture_root: str | Path) -> Path:
         folder = Path(capture_root) / LIGHTING_FOLDER
         folder.mkdir(parents=True, exist_ok=True)
-        bgr = np.ascontiguousarray(self.environment.radiance[:, :, ::-1], dtype=np.float32)
-        ok, encoded = cv2.imencode(".hdr", bgr)
-        if not ok:
-            raise OSError(f"{folder / PANORAMA_FILE}: OpenCV could not encode the panorama")
-        atomic_write(folder / PANORAMA_FILE, lambda tmp: tmp.write_bytes(encoded.tobytes()))
+        write_hdr(folder / PANORAMA_FILE, self.environment)
         write_png(folder / PICTURE_FILE, lighting_picture(self))
 
         def write_observed(tmp: Path) -> None:
@@ -95,6 +91,14 @@ class CaptureLighting:
             "note": "directions no photo saw are filled smoothly from those they did (not measured)",
         })
         return folder / PANORAMA_FILE
+
+
+def write_hdr(path: Path, environment: Environment) -> Path:
+    """An environment as a Radiance .hdr file, atomically."""
+    ok, encoded = cv2.imencode(".hdr", np.ascontiguousarray(environment.radiance[:, :, ::-1], dtype=np.float32))
+    if not ok:
+        raise OSError(f"{path}: OpenCV could not encode the panorama")
+    return atomic_write(path, lambda tmp: tmp.write_bytes(encoded.tobytes()))
 
 
 def lighting_picture(lighting: CaptureLighting, scale: int = 4) -> np.ndarray:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from lirm.renderer.environment import equirect_uv_to_direction, rotation_about_z
+from lirm.renderer.environment import Environment, rotation_about_z
 from lirm.renderer.ibl import sample_cube
 from lirm.renderer.pbr_renderer import Lighting, PBRRenderer
 
@@ -19,11 +19,7 @@ from .split_sum_shading import SplitSumTables
 
 def equirect_directions(width: int) -> np.ndarray:
     """(width / 2, width, 3) unit directions of an equirectangular grid's texel centres."""
-    height = width // 2
-    u = (np.arange(width) + 0.5) / width
-    v = (np.arange(height) + 0.5) / height
-    uu, vv = np.meshgrid(u, v)
-    return equirect_uv_to_direction(uu, vv).astype(np.float32)
+    return Environment(np.zeros((width // 2, width, 3), np.float32)).texel_directions()[0].astype(np.float32)
 
 
 def tables_from_lighting(renderer: PBRRenderer, lighting: Lighting, max_width: int = 1024) -> SplitSumTables:

@@ -40,16 +40,10 @@ class PanoramaLighting(torch.nn.Module):
         super().__init__()
         height, width = log_radiance.shape[:2]
         self.log_radiance = torch.nn.Parameter(log_radiance.clone().float())
-        u = (torch.arange(width, dtype=torch.float64) + 0.5) / width
-        v = (torch.arange(height, dtype=torch.float64) + 0.5) / height
-        phi = (0.5 - u) * 2.0 * math.pi
-        theta = v * math.pi
-        t, p = torch.meshgrid(theta, phi, indexing="ij")
-        dirs = torch.stack([torch.sin(t) * torch.cos(p), torch.sin(t) * torch.sin(p), torch.cos(t)], -1)
-        edges = torch.linspace(0.0, math.pi, height + 1, dtype=torch.float64)
-        band = (torch.cos(edges[:-1]) - torch.cos(edges[1:])) * (2.0 * math.pi / width)
-        self.register_buffer("directions", dirs.reshape(-1, 3).float())
-        self.register_buffer("solid_angle", band[:, None].expand(height, width).reshape(-1).float())
+        # The texel grid of an environment of this size (its one definition: renderer/environment.py).
+        dirs, solid_angle = Environment(np.zeros((height, width, 3), np.float32)).texel_directions()
+        self.register_buffer("directions", torch.from_numpy(dirs.reshape(-1, 3)).float())
+        self.register_buffer("solid_angle", torch.from_numpy(solid_angle.reshape(-1)).float())
         self.register_buffer("lut", brdf_table())
         self.min_lobe_cos = math.cos(math.pi / height)  # a texel's angular size
 

@@ -208,14 +208,12 @@ def _save_fitted_lighting(lighting, folder: Path) -> None:
     """The lighting fitted with the materials, beside the state (lighting.hdr and a picture)."""
     import cv2
 
-    from lirm.engine.io.atomic_files import atomic_write
     from lirm.engine.io.images import write_png
+    from lirm.engine.lighting.capture_lighting import write_hdr
     from lirm.renderer.tonemap import tonemap
 
     environment = lighting.environment()
-    ok, encoded = cv2.imencode(".hdr", np.ascontiguousarray(environment.radiance[:, :, ::-1], dtype=np.float32))
-    if ok:
-        atomic_write(folder / "lighting.hdr", lambda tmp: tmp.write_bytes(encoded.tobytes()))
+    write_hdr(folder / "lighting.hdr", environment)
     key = max(float(np.median(environment.radiance.mean(-1))), 1e-6)
     picture = cv2.resize(tonemap(environment.radiance * (0.18 / key)).astype(np.float32), (512, 256), interpolation=cv2.INTER_NEAREST)
     write_png(folder / "lighting.png", (picture * 255).astype(np.uint8))
