@@ -51,7 +51,12 @@ def test_new_project_add_photos_and_recent_from_the_file_menu(lego_capture, shar
         subprocess.run(["xdotool", "mousemove", "--window", window[0], "22", "9", "click", "1"], env=env, check=True)
         time.sleep(1.5)
         clicked.write_text("")
-        time.sleep(2.0)
+        # The keys below must come after the menu's screenshot (a loaded machine draws a frame in seconds).
+        shot = tmp_path / "out" / "file_menu.png"
+        deadline = time.time() + 120
+        while not shot.is_file() and time.time() < deadline and proc.poll() is None:
+            time.sleep(0.3)
+        time.sleep(0.5)
         # Close the menu, then F1: the viewport's help overlay (issue 21, case 7).
         subprocess.run(["xdotool", "key", "--window", window[0], "Escape"], env=env, check=True)
         time.sleep(0.5)
