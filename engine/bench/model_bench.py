@@ -19,7 +19,7 @@ import os
 import platform
 import statistics
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import torch
@@ -51,6 +51,7 @@ class ModelBenchConfig:
     baseline_updates: tuple[int, ...] | None = None  # k values (k x views_per_update views); None: 1, 2, 4.. and updates
     baseline_max_views: int | None = None  # skip baseline sizes above this many views
     peak_flops: float | None = None  # the device's peak FLOP/s for the fraction; None: look the GPU up
+    image_size: int | None = None  # input views of this size instead of the preset's (a multiple of its patch)
     json_path: Path | None = None  # also write the result here (atomically)
 
 
@@ -139,6 +140,8 @@ def run_model_bench(config: ModelBenchConfig, progress=None) -> ModelBenchResult
         raise LirmUserError(f"views per update must be at least 1, got {config.views_per_update}")
     try:
         cfg = preset(config.preset)
+        if config.image_size:
+            cfg = replace(cfg, image_size=config.image_size)
     except ValueError as e:
         raise LirmUserError(str(e)) from None
     device = _resolve_device(config.device)

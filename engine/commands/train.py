@@ -30,6 +30,9 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--eval-objects", type=int, default=2, help="held-out objects in those evaluations (default 2)")
     parser.add_argument("--workers", type=int, default=0, help="data-loader processes rendering scenes (default 0: in the training process)")
     parser.add_argument("--device", default="auto", help="auto (CUDA when present), cpu or cuda")
+    parser.add_argument("--batch-scenes", type=int, help="scenes per step over all processes (default: the stage's)")
+    parser.add_argument("--slim-copy", type=Path, help="at the end, also write the weights as float16 with the step but no "
+                        "AdamW moments (a third of the size; --resume from it continues the step with fresh moments)")
     parser.add_argument("--no-lpips", action="store_true", help="use the SSIM + gradient loss even when LPIPS could run")
     parser.set_defaults(run=run)
 
@@ -48,7 +51,8 @@ def run(args: argparse.Namespace) -> int:
                          data_seed=args.data_seed, scene_pool=args.scene_pool,
                          cache_dir=str(args.cache) if args.cache else None, scenes=scenes, lpips=not args.no_lpips,
                          checkpoint_every=args.checkpoint_every, eval_every=args.eval_every,
-                         eval_objects=args.eval_objects, workers=args.workers, device=args.device)
+                         eval_objects=args.eval_objects, workers=args.workers, device=args.device,
+                         batch_scenes=args.batch_scenes, slim_copy=str(args.slim_copy) if args.slim_copy else None)
     stage = config.stage_settings()
     if rank0:
         print(f"stage {args.stage} of '{args.preset}': {stage.steps} steps, lr {stage.learning_rate[0]:g} -> {stage.learning_rate[1]:g}, "

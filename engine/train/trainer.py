@@ -46,7 +46,7 @@ from .objective import TrainingObjective
 from .perceptual import perceptual_loss
 from .scene_source import SceneSource
 from .stages import StageConfig, stage_config
-from .training_checkpoint import load_resume_point, restore_optimizer, save_training_checkpoint
+from .training_checkpoint import load_resume_point, restore_optimizer, save_slim_checkpoint, save_training_checkpoint
 from .training_sample import make_sample
 
 log = logging.getLogger(__name__)
@@ -70,15 +70,19 @@ class TrainConfig:
     checkpoint_every: int = 100
     eval_every: int = 0  # 0: no periodic evaluation
     eval_objects: int = 2
-    eval_size: int = 64
+    eval_size: int | None = None  # held-out views' size; None: the model's input size, at most 128
     workers: int = 0  # data-loader processes rendering scenes
     device: str = "auto"
     max_skipped_steps: int = 20
+    batch_scenes: int | None = None  # scenes per step over all processes; None: the stage's
+    slim_copy: str | None = None  # also write the last checkpoint here as float16 weights + step, no moments
 
     def stage_settings(self) -> StageConfig:
         stage = stage_config(self.preset, self.stage)
         if self.stage_steps:
             stage = replace(stage, steps=self.stage_steps, warmup_steps=min(stage.warmup_steps, self.stage_steps // 10))
+        if self.batch_scenes:
+            stage = replace(stage, batch_scenes=self.batch_scenes)
         return stage
 
     def to_dict(self) -> dict:
@@ -98,6 +102,15 @@ def learning_rate(stage: StageConfig, step: int) -> float:
         return start * (step + 1) / stage.warmup_steps
     progress = min((step - stage.warmup_steps) / max(stage.steps - stage.warmup_steps, 1), 1.0)
     return end + 0.5 * (start - end) * (1.0 + math.cos(math.pi * progress))
+
+
+# Resuming from a slim checkpoint (no AdamW moments): the second moments start at zero, so the first
+# updates would be full-size sign steps; ramp the scheduled rate up over these steps instead.
+MOMENT_RESTART_STEPS = 50
+
+
+def moment_restart_factor(step: int, resumed_at: int) -> float:
+    return min(1.0, (step - resumed_at + 1) / MOMENT_RESTART_STEPS)
 
 
 def inverse_beta(stage: StageConfig, step: int) -> float:
@@ -171,8 +184,9 @@ def run_training(config: TrainConfig, progress: Callable[[dict], None] | None = 
         shutdown(info)
 
 
-def _prepare_model(config: TrainConfig, stage: StageConfig, info: ProcessGroupInfo) -> tuple[LIRM, int, dict]:
-    """The model to train, the step to start at and the resume point's optimizer state (if continuing)."""
+def _prepare_model(config: TrainConfig, stage: StageConfig, info: ProcessGroupInfo) -> tuple[LIRM, int, dict, bool]:
+    """The model to train, the step to start at, the resume point's optimizer state (if continuing)
+    and whether its moments were dropped (a slim checkpoint)."""
     if config.resume:
         point = load_resume_point(config.resume, config.preset)  # errors before any compute is spent
         if point.stage == config.stage:
@@ -180,22 +194,24 @@ def _prepare_model(config: TrainConfig, stage: StageConfig, info: ProcessGroupIn
                 raise LirmUserError(f"checkpoint {config.resume} already finished stage {config.stage} ({point.step} of "
                                     f"{stage.steps} steps); go on with --stage {config.stage + 1} --resume {config.resume}")
             if info.is_main:
-                log.info("continuing stage %d from step %d of %s", config.stage, point.step, config.resume)
-            return point.model.train(), point.step, point.optimizer_state
+                log.info("continuing stage %d from step %d of %s%s", config.stage, point.step, config.resume,
+                         " (slim checkpoint: fresh AdamW moments, learning rate warmed up again over "
+                         f"{MOMENT_RESTART_STEPS} steps)" if point.moments_dropped else "")
+            return point.model.train(), point.step, point.optimizer_state, point.moments_dropped
         if info.is_main:
             what = f"stage {point.stage}" if point.stage else "model-only"
             log.info("starting stage %d from the weights of %s (%s checkpoint)", config.stage, config.resume, what)
-        return point.model.train(), 0, {}
+        return point.model.train(), 0, {}, False
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.model_seed)
         model = LIRM(model_preset(config.preset))
-    return model.train(), 0, {}
+    return model.train(), 0, {}, False
 
 
 def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> TrainResult:
     stage = config.stage_settings()
     out_dir = Path(config.out_dir)
-    model, start_step, optimizer_state = _prepare_model(config, stage, info)
+    model, start_step, optimizer_state, moments_dropped = _prepare_model(config, stage, info)
     end_step = min(stage.steps, config.max_steps) if config.max_steps else stage.steps
     if start_step >= end_step:
         raise LirmUserError(f"nothing to do: the run is at step {start_step} and --max-steps is {config.max_steps}")
@@ -204,7 +220,7 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
     cuda = device.type == "cuda"
     model.transformer.gradient_checkpointing = cuda  # memory for batch on GPUs; a CPU run is small anyway
     optimizer = torch.optim.AdamW(model.parameters(), lr=stage.learning_rate[0], betas=(0.9, 0.95), weight_decay=0.05)  # decay as MeshLRM; the paper gives only the betas
-    if start_step > 0:  # continuing: the moments must be there (restore_optimizer says so if not)
+    if start_step > 0 and not moments_dropped:  # continuing: the moments must be there (restore_optimizer says so if not)
         restore_optimizer(optimizer, model, optimizer_state, config.resume)
     weights = replace(config.losses, numerical_normal=stage.numerical_normal_weight)
     objective = TrainingObjective(model, weights, perceptual_loss(config.lpips)).to(device)
@@ -236,7 +252,8 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
         if config.eval_every:
             from .periodic_eval import PeriodicEvaluator
 
-            evaluator = PeriodicEvaluator(out_dir / "eval.csv", config.eval_objects, config.eval_size, start_step)
+            evaluator = PeriodicEvaluator(out_dir / "eval.csv", config.eval_objects,
+                                          config.eval_size or min(128, model.config.image_size), start_step)
 
     stop = {"requested": False}
     previous_handler = None
@@ -255,7 +272,7 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
             step = sample.step
             data_seconds = time.perf_counter() - data_start
             step_start = time.perf_counter()
-            lr = learning_rate(stage, step)
+            lr = learning_rate(stage, step) * (moment_restart_factor(step, start_step) if moments_dropped else 1.0)
             for group in optimizer.param_groups:
                 group["lr"] = lr
             inv_beta = inverse_beta(stage, step)
@@ -309,6 +326,9 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
             signal.signal(signal.SIGINT, previous_handler)
         if writer is not None:
             writer.close()
+        if info.is_main and config.slim_copy and history:
+            save_slim_checkpoint(Path(config.slim_copy), model, config.stage, history[-1]["step"], run)
+            log.info("slim checkpoint (float16, no moments) of step %d written to %s", history[-1]["step"], config.slim_copy)
         if info.is_main and (out_dir / "metrics.csv").is_file():
             from .loss_curve import write_loss_curves
 

@@ -27,6 +27,7 @@ class ResumePoint:
     step: int  # iterations done in that stage
     run: dict  # the run's settings as saved
     optimizer_state: dict[str, torch.Tensor]  # "param_name/moment" -> tensor (empty for model-only checkpoints)
+    moments_dropped: bool = False  # a slim checkpoint: continue at `step` with fresh AdamW moments
 
 
 def save_training_checkpoint(path: Path, model: LIRM, optimizer: torch.optim.Optimizer, stage: int, step: int,
@@ -42,6 +43,15 @@ def save_training_checkpoint(path: Path, model: LIRM, optimizer: torch.optim.Opt
     return save_checkpoint(model, path, metadata=metadata, training_tensors=tensors)
 
 
+def save_slim_checkpoint(path: Path, model: LIRM, stage: int, step: int, run: dict) -> Path:
+    """The weights in float16 with the stage and step but no AdamW moments: a third of a full
+    checkpoint's size, small enough to keep in the repository and carry between GPU slices. A run
+    resumed from it continues the same step (and so the same data and schedule); its moments restart
+    and the learning rate warms up again over a few steps (trainer.MOMENT_RESTART_STEPS)."""
+    metadata = {"training": {"stage": stage, "step": step, "run": run, "moments": "dropped"}, "trained": True}
+    return save_checkpoint(model, path, dtype=torch.float16, metadata=metadata)
+
+
 def load_resume_point(path: str | Path, preset: str) -> ResumePoint:
     """Everything in a checkpoint to continue from; errors name the file and what to pass instead."""
     config, extra = peek_checkpoint(path)
@@ -51,7 +61,7 @@ def load_resume_point(path: str | Path, preset: str) -> ResumePoint:
         # A model-only checkpoint (e.g. the shipped one) can still start a stage from its weights.
         return ResumePoint(model, 0, 0, {}, {})
     return ResumePoint(model, int(training["stage"]), int(training["step"]), dict(training.get("run") or {}),
-                       load_training_tensors(path))
+                       load_training_tensors(path), moments_dropped=training.get("moments") == "dropped")
 
 
 def restore_optimizer(optimizer: torch.optim.Optimizer, model: LIRM, state: dict[str, torch.Tensor], path: str | Path) -> None:

@@ -133,6 +133,15 @@ def test_bad_requests_are_user_errors():
             run_model_bench(ModelBenchConfig(preset="tiny", device="cuda"))
 
 
+def test_an_image_size_override_changes_the_image_tokens():
+    cfg = preset("tiny")
+    result = run_model_bench(ModelBenchConfig(preset="tiny", updates=1, views_per_update=1, baseline=False, image_size=128))
+    assert result.image_size == 128
+    assert result.tokens["image"] == cfg.image_tokens_per_view(128, 128) == 4 * cfg.image_tokens_per_view(64, 64)
+    with pytest.raises(LirmUserError, match="patch"):
+        run_model_bench(ModelBenchConfig(preset="tiny", updates=1, baseline=False, image_size=100))
+
+
 def test_memory_does_not_grow_over_eight_updates():
     """The issue's check: peak memory after 8 updates within 5% of after 1, and the state holds
     exactly its tokens (no slice keeping the transformer's whole output alive)."""

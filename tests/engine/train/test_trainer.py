@@ -71,6 +71,33 @@ def test_resume_continues_the_exact_loss_curve(tmp_path, cache):
     assert [int(r["step"]) for r in _csv(tmp_path / "split" / "metrics.csv")] == [1, 2, 3, 4, 5, 6]
 
 
+def test_a_slim_copy_resumes_at_its_step_with_fresh_moments_and_a_warm_up(tmp_path, cache):
+    """The float16 copy carried between GPU slices: a third of the size, continues the same step
+    (same data, same schedule) and ramps the learning rate up again because AdamW starts afresh."""
+    from lirm.engine.train.trainer import MOMENT_RESTART_STEPS, learning_rate
+
+    slim = tmp_path / "slim.safetensors"
+    first = run_training(_config(tmp_path / "run", cache, max_steps=2, checkpoint_every=2, slim_copy=str(slim),
+                                 batch_scenes=1))
+    assert slim.stat().st_size < 0.4 * first.checkpoint.stat().st_size
+    model, extra = load_checkpoint(slim)
+    assert extra["training"]["step"] == 2 and extra["training"]["moments"] == "dropped"
+    assert {str(t.dtype) for t in load_file(slim).values() if t.is_floating_point()} == {"torch.float16"}
+    resumed = run_training(_config(tmp_path / "run", cache, max_steps=4, resume=str(slim), batch_scenes=1))
+    assert resumed.first_step == 2 and [r["step"] for r in resumed.history] == [3, 4]
+    stage = _config(tmp_path, cache).stage_settings()
+    for record, step in zip(resumed.history, (2, 3)):
+        expected = learning_rate(stage, step) * (step - 2 + 1) / MOMENT_RESTART_STEPS
+        assert record["lr"] == pytest.approx(expected)
+    assert [int(r["step"]) for r in _csv(tmp_path / "run" / "metrics.csv")] == [1, 2, 3, 4]
+
+
+def test_batch_scenes_overrides_the_stages_batch():
+    config = TrainConfig(preset="small", stage=1, batch_scenes=8)
+    assert config.stage_settings().batch_scenes == 8
+    assert TrainConfig(preset="small", stage=1).stage_settings().batch_scenes == 32
+
+
 def test_a_later_stage_starts_from_the_earlier_stages_weights(tmp_path, cache):
     first = run_training(_config(tmp_path / "s1", cache, max_steps=1, checkpoint_every=1))
     second = run_training(_config(tmp_path / "s2", cache, stage=3, max_steps=1, resume=str(first.checkpoint)))
