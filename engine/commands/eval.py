@@ -34,6 +34,8 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--no-relight", action="store_true",
                         help="skip the relighting test (each row's .glb export rendered under an environment that lit none "
                              "of the inputs; about 10 s per object and row on 2 cores)")
+    parser.add_argument("--pictures", type=Path, help="write the relighting test's pictures here: per row and object, the truth "
+                        "under the relighting environment above the relit export, on three output views")
     parser.add_argument("-o", "--out", type=Path, help="also write the table (.md) and the numbers (.json beside it)")
     parser.set_defaults(run=run)
 
@@ -44,6 +46,8 @@ def run(args: argparse.Namespace) -> int:
     from ..evaluation.evaluate import EvalConfig
 
     require_at_least_one(args, "objects", "updates", "output_views")
+    if args.pictures and args.no_relight:
+        raise LirmUsageError("--pictures shows the relighting test, which --no-relight skips; leave one of them out")
     require_range(args, "size", VIEW_SIZE, " pixels")
     require_range(args, "mesh_resolution", MESH_RESOLUTION, " samples per side")
     source = model_with_warning(args.checkpoint)
@@ -63,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_relight and any(o.relight is not None for o in objects):
         from ..evaluation.relighting import Relighter
 
-        relighter = Relighter()
+        relighter = Relighter(pictures=args.pictures)
     try:
         _evaluate_contenders(args, contenders, objects, config, model, relighter, results)
     finally:
@@ -76,6 +80,8 @@ def _evaluate_contenders(args, contenders, objects, config, model, relighter, re
     from ..evaluation.evaluate import evaluate_heldout
 
     for name, reconstructor in contenders:
+        if relighter is not None:
+            relighter.row = name
         bar = view_progress_bar(len(objects), f"evaluating {name}")
         bar.unit = "object"
         try:
@@ -92,6 +98,8 @@ def _evaluate_contenders(args, contenders, objects, config, model, relighter, re
         refine = refine_preset("default", inverse_rendering=bool(args.materials),
                                **({"minutes": args.refine_minutes} if args.refine_minutes else {}))
         for name, init in (("refined from LIRM", "lirm"), ("refined from the hull", "hull")):
+            if relighter is not None:
+                relighter.row = name
             bar = view_progress_bar(len(objects), f"{name} ({refine.minutes:g} min each)")
             bar.unit = "object"
             try:

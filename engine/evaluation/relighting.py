@@ -56,6 +56,9 @@ def render_relight_truth(renderer: PBRRenderer, meshes, transform: np.ndarray, c
     return RelightTruth(environment, rotation_deg, exposure_ev, radiance, mask)
 
 
+PICTURE_VIEWS = 3  # output views shown per picture
+
+
 @dataclass(frozen=True)
 class RelightConfig:
     grid: int = 96  # marching-cubes samples per side for the exported mesh
@@ -64,12 +67,18 @@ class RelightConfig:
 
 
 class Relighter:
-    """Scores fields by the relighting test; owns one GL context for the exports and the renders."""
+    """Scores fields by the relighting test; owns one GL context for the exports and the renders.
 
-    def __init__(self, config: RelightConfig = RelightConfig()):
+    With `pictures`, each scored export also leaves a picture there (relight_pictures.py): the truth
+    and the relit export side by side on the first output views, named after `row` (set by the
+    caller per contender) and the object; a row scored after several updates keeps the last."""
+
+    def __init__(self, config: RelightConfig = RelightConfig(), pictures: Path | None = None):
         from lirm.renderer.context import create_headless_context
 
         self.config = config
+        self.pictures = Path(pictures) if pictures else None
+        self.row = "row"
         self.ctx = create_headless_context()
         self.renderer = PBRRenderer(self.ctx)
         self._lighting_key = None
@@ -96,14 +105,22 @@ class Relighter:
             model = load_model(path)  # what a user opens: the .glb read back, in its own (the field's) frame
         lighting = self._lighting_for(obj, truth)
         scene = self.renderer.upload(model.meshes)
+        shown = []
         try:
             for i in outputs:
                 out = self.renderer.render_view(scene, obj.views.cameras[i], lighting, RenderSettings(show_environment=False, supersample=2))
                 for key, value in relight_metrics(out.radiance, out.mask, truth.radiance[i], truth.mask[i], truth.exposure_ev,
                                                   lpips_net).items():
                     scores.setdefault(key, []).append(value)
+                if self.pictures is not None and len(shown) < PICTURE_VIEWS:
+                    shown.append((truth.radiance[i], truth.mask[i], out.radiance, out.mask))
         finally:
             scene.release()
+        if shown:
+            from .relight_pictures import write_relight_picture
+
+            write_relight_picture(self.pictures / f"{_slug(self.row)}__{_slug(obj.name)}.png", shown, truth.exposure_ev,
+                                  f"{self.row} / {obj.name}: relit by {truth.name}")
 
     def _lighting_for(self, obj, truth: RelightTruth):
         key = (obj.name, truth.name, truth.rotation_deg)
@@ -126,10 +143,8 @@ def relight_metrics(radiance: np.ndarray, mask: np.ndarray, true_radiance: np.nd
     region = (true_mask > 0.5) | (mask > 0.5)
     if not region.any():
         return {}
-    p = np.asarray(radiance, np.float64)
+    p = scale_to_truth(radiance, true_radiance, region)
     t = np.asarray(true_radiance, np.float64)
-    scale = (p[region] * t[region]).sum(0) / np.maximum((p[region] ** 2).sum(0), 1e-12)
-    p = p * scale
     peak = max(float(t[region].max()), 1e-6)
     mse_h = float(((p[region] - t[region]) ** 2).mean())
     shown_p, shown_t = tonemap(p, exposure_ev), tonemap(t, exposure_ev)
@@ -142,6 +157,18 @@ def relight_metrics(radiance: np.ndarray, mask: np.ndarray, true_radiance: np.nd
         with torch.no_grad():
             out["relight_lpips"] = float(lpips_net(as_tensor(shown_p), as_tensor(shown_t)))
     return out
+
+
+def scale_to_truth(radiance: np.ndarray, true_radiance: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """The prediction scaled per channel by least squares on `region` (Stanford-ORB's scale invariance)."""
+    p = np.asarray(radiance, np.float64)
+    t = np.asarray(true_radiance, np.float64)
+    scale = (p[region] * t[region]).sum(0) / np.maximum((p[region] ** 2).sum(0), 1e-12)
+    return p * scale
+
+
+def _slug(text: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in text).strip("_") or "x"
 
 
 def _db(peak_squared: float, mse: float) -> float:

@@ -38,6 +38,26 @@ def display_to_radiance(display: np.ndarray, response: str = "aces") -> np.ndarr
     return np.maximum(v @ np.linalg.inv(ACES_INPUT).T, 0.0)
 
 
+def display_to_radiance_torch(display, response: str = "aces"):
+    """`display_to_radiance` in torch (no gradient is needed through it: it makes targets)."""
+    import torch
+
+    if response not in RESPONSES:
+        raise ValueError(f"unknown camera response {response!r}; choose one of {', '.join(RESPONSES)}")
+    d = display.clamp(0.0, 1.0)
+    linear = torch.where(d <= 0.04045, d / 12.92, ((d + 0.055) / 1.055) ** 2.4)
+    if response == "srgb":
+        return linear
+    out_inverse = torch.as_tensor(np.linalg.inv(ACES_OUTPUT), dtype=d.dtype, device=d.device)
+    in_inverse = torch.as_tensor(np.linalg.inv(ACES_INPUT), dtype=d.dtype, device=d.device)
+    y = (linear @ out_inverse.T).clamp(0.0, _CURVE_CAP)
+    a = 1.0 - 0.983729 * y
+    b = 0.0245786 - 0.4329510 * y
+    c = -(0.000090537 + 0.238081 * y)
+    v = (-b + (b * b - 4.0 * a * c).clamp(min=0.0).sqrt()) / (2.0 * a)
+    return (v @ in_inverse.T).clamp(min=0.0)
+
+
 def radiance_to_display_torch(radiance, response: str = "aces"):
     """Differentiable forward of the camera model (renderer/tonemap.py's `tonemap` at exposure 0):
     linear radiance (..., 3) -> display sRGB in [0, 1]."""

@@ -23,6 +23,7 @@ class LossWeights:
     # shaded under the capture's lighting against the photo, the lighting held to what the photos'
     # backgrounds saw and smooth where they saw nothing.
     pbr: float = 0.5
+    albedo_delit: float = 0.5  # the albedo against the photo de-lit in closed form (objective.delit_albedo)
     light_seen: float = 0.2
     light_smooth: float = 0.02
 

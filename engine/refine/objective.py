@@ -8,7 +8,7 @@ from dataclasses import replace
 import torch
 import torch.nn.functional as F
 
-from lirm.engine.lighting.camera_response import radiance_to_display_torch
+from lirm.engine.lighting.camera_response import display_to_radiance_torch, radiance_to_display_torch
 from lirm.engine.lighting.split_sum_shading import shade
 
 from .config import LossWeights
@@ -83,6 +83,33 @@ def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alpha
     albedo = (render.albedo[solid] / o[:, None]).clamp(0.0, 1.0)
     roughness = (render.roughness[solid] / o).clamp(0.0, 1.0)
     metallic = (render.metallic[solid] / o).clamp(0.0, 1.0)
-    shaded = shade(lighting, albedo, roughness, metallic, render.normal[solid], -directions[solid]).radiance
+    normal, view = render.normal[solid], -directions[solid]
+    shaded = shade(lighting, albedo, roughness, metallic, normal, view).radiance
     terms["pbr"] = (radiance_to_display_torch(shaded) - colours[solid]).abs().mean()
+    target, usable = delit_albedo(lighting, colours[solid], roughness.detach(), metallic.detach(), normal.detach(), view)
+    if usable.any():
+        terms["albedo_delit"] = (albedo[usable] - target[usable]).abs().mean()
     return terms
+
+
+@torch.no_grad()
+def delit_albedo(lighting, colours: torch.Tensor, roughness: torch.Tensor, metallic: torch.Tensor, normal: torch.Tensor,
+                 view: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The albedo that would shade to each photo colour under the current lighting, normal, roughness
+    and metallic: the shading is (nearly) affine in the albedo, so shading with albedo 0 and 1 and
+    solving per channel de-lights the photo in closed form. A direct, per-ray target for the albedo
+    (the photometric term alone reaches it only through the tone curve, slowly); pixels near
+    clipping (a lower bound only) and ones the light barely reaches are left out."""
+    radiance = display_to_radiance_torch(colours)
+    shaded = lambda albedo: shade(lighting, albedo, roughness, metallic, normal, view).radiance  # noqa: E731
+    dark, lit = shaded(torch.zeros_like(colours)), shaded(torch.ones_like(colours))
+    gain = lit - dark
+    target = ((radiance - dark) / gain.clamp(min=1e-6)).clamp(0.0, 1.0)
+    # Metal makes the Fresnel (and the multiple-scattering term) depend on the albedo too: one Newton
+    # step from the affine solution takes what remains.
+    step = 1e-2
+    at = shaded(target)
+    slope = ((shaded(target + step) - at) / step).clamp(min=1e-6)
+    target = (target - (at - radiance) / slope).clamp(0.0, 1.0)
+    usable = (colours.max(dim=-1).values < 0.98) & (gain.min(dim=-1).values > 1e-3 * gain.max().clamp(min=1e-6))
+    return target, usable

@@ -80,6 +80,9 @@ def test_lirm_eval_refuses_a_bad_set_and_a_missing_checkpoint(tmp_path, tiny_che
     done = subprocess.run([sys.executable, "-m", "lirm.engine.cli", "eval", str(tmp_path / "none.safetensors")],
                           capture_output=True, text=True)
     assert done.returncode == 3 and "does not exist" in done.stderr
+    done = subprocess.run([sys.executable, "-m", "lirm.engine.cli", "eval", "--no-relight", "--pictures", str(tmp_path / "p")],
+                          capture_output=True, text=True)
+    assert done.returncode != 0 and "--pictures shows the relighting test" in done.stderr
 
 
 def test_gltf_heldout_set_renders_the_models_under_the_hdris(renderer, shared_data):

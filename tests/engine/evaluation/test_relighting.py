@@ -41,7 +41,7 @@ def test_the_metrics_ignore_a_global_scale_and_see_errors():
 
 
 @pytest.mark.slow
-def test_an_export_of_the_true_shape_relights_like_the_truth(renderer):
+def test_an_export_of_the_true_shape_relights_like_the_truth(renderer, tmp_path):
     environment = make_procedural_environment("sky", width=256)
     cameras = [Camera.from_fov(64, 64, 40.0, look_at((3.0 * np.cos(a), 3.0 * np.sin(a), 1.0), (0, 0, 0)))
                for a in np.radians([0.0, 120.0, 240.0])]
@@ -50,10 +50,12 @@ def test_an_export_of_the_true_shape_relights_like_the_truth(renderer):
                                  environment, 30.0, 0.0)
     obj = SimpleNamespace(name="sphere", relight=truth, views=SimpleNamespace(cameras=cameras))
     pattern = _Plain(colour_a=ORANGE, colour_b=ORANGE, roughness_range=(0.5, 0.5))
-    relighter = Relighter(RelightConfig(grid=64, faces=4000, texture=128))
+    relighter = Relighter(RelightConfig(grid=64, faces=4000, texture=128), pictures=tmp_path / "pictures")
     try:
         right, wrong = {}, {}
+        relighter.row = "true shape"
         relighter.score(SphereField(0.5, pattern=pattern), obj, [0, 1, 2], right)
+        relighter.row = "shifted/smaller"
         relighter.score(SphereField(0.35, center=(0.1, 0.0, 0.0), pattern=pattern), obj, [0, 1, 2], wrong)
     finally:
         relighter.release()
@@ -61,6 +63,16 @@ def test_an_export_of_the_true_shape_relights_like_the_truth(renderer):
     # a smaller, shifted sphere does not.
     assert np.mean(right["relight_psnr_l"]) > 30.0, right
     assert np.mean(wrong["relight_psnr_l"]) < np.mean(right["relight_psnr_l"]) - 10.0, wrong
+    # The pictures: per row, the truth above the export on the three views; the true shape's halves agree.
+    import cv2
+
+    assert sorted(p.name for p in (tmp_path / "pictures").iterdir()) == ["shifted_smaller__sphere.png", "true_shape__sphere.png"]
+    for name, close in (("true_shape__sphere.png", True), ("shifted_smaller__sphere.png", False)):
+        picture = cv2.imread(str(tmp_path / "pictures" / name)).astype(np.float64)
+        body = picture[22:]
+        assert body.shape[1] == 3 * body.shape[0] // 2  # three square views side by side, two rows
+        top, bottom = body[: body.shape[0] // 2], body[body.shape[0] // 2:]
+        assert (np.abs(top - bottom).mean() < 4.0) == close, name
 
 
 @pytest.mark.slow

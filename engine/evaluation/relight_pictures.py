@@ -1,0 +1,35 @@
+"""Pictures of the relighting test (`lirm eval --pictures DIR`): for a few output views, the true
+object under the relighting environment above the relit export, both as the display shows them
+(the prediction after the test's per-channel scale), so that what the numbers say can be seen."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from lirm.renderer.tonemap import tonemap
+
+from .relighting import scale_to_truth
+
+
+def write_relight_picture(path: Path, shown: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+                          exposure_ev: float, title: str) -> Path:
+    """`shown`: (true radiance, true mask, predicted radiance, predicted mask) per view."""
+    columns = []
+    for true_radiance, true_mask, radiance, mask in shown:
+        region = (true_mask > 0.5) | (mask > 0.5)
+        scaled = scale_to_truth(radiance, true_radiance, region) if region.any() else radiance
+        columns.append(np.concatenate([tonemap(np.asarray(true_radiance, np.float64), exposure_ev),
+                                       tonemap(scaled, exposure_ev)], axis=0))
+    image = np.concatenate(columns, axis=1)
+    image = (np.clip(image, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    scale = max(1, 256 // image.shape[0] * 2)  # small protocol views are enlarged to be looked at
+    image = cv2.resize(image, (image.shape[1] * scale, image.shape[0] * scale), interpolation=cv2.INTER_NEAREST)
+    banner = np.full((22, image.shape[1], 3), 255, np.uint8)
+    cv2.putText(banner, f"{title}  (top: truth, bottom: export)"[:120], (4, 15), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1,
+                cv2.LINE_AA)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), cv2.cvtColor(np.concatenate([banner, image]), cv2.COLOR_RGB2BGR))
+    return path

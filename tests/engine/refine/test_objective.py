@@ -1,0 +1,53 @@
+"""The refinement's inverse-rendering pieces: the closed-form de-lit albedo target."""
+
+from __future__ import annotations
+
+import torch
+
+from lirm.engine.lighting.camera_response import display_to_radiance_torch, radiance_to_display_torch
+from lirm.engine.lighting.panorama_lighting import PanoramaLighting
+from lirm.engine.lighting.split_sum_shading import shade
+from lirm.engine.refine.objective import delit_albedo
+from lirm.renderer.procedural_environments import make_procedural_environment
+
+
+def _surface(n: int, seed: int = 0):
+    g = torch.Generator().manual_seed(seed)
+    normal = torch.nn.functional.normalize(torch.randn(n, 3, generator=g), dim=-1)
+    view = torch.nn.functional.normalize(normal + 0.5 * torch.randn(n, 3, generator=g), dim=-1)
+    albedo = 0.05 + 0.85 * torch.rand(n, 3, generator=g)
+    roughness = 0.2 + 0.7 * torch.rand(n, generator=g)
+    return normal, view, albedo, roughness
+
+
+def test_the_camera_curve_inverts_in_torch():
+    display = torch.linspace(0.02, 0.95, 40)[:, None] * torch.tensor([[1.0, 0.8, 0.6]])
+    torch.testing.assert_close(radiance_to_display_torch(display_to_radiance_torch(display)), display, atol=1e-5, rtol=0)
+
+
+def test_a_shaded_photo_de_lights_to_its_albedo_even_with_metal():
+    lighting = PanoramaLighting.from_environment(make_procedural_environment("sky", width=128), height=16)
+    normal, view, albedo, roughness = _surface(400)
+    for metallic in (torch.zeros(400), torch.full((400,), 0.7)):
+        with torch.no_grad():
+            photo = radiance_to_display_torch(shade(lighting, albedo, roughness, metallic, normal, view).radiance)
+        target, usable = delit_albedo(lighting, photo, roughness, metallic, normal, view)
+        assert usable.float().mean() > 0.8  # all but clipped or unlit pixels
+        error = (target[usable] - albedo[usable]).abs()
+        assert error.median() < 0.01 and error.quantile(0.9) < 0.05, (metallic[0], error.quantile(0.9))
+
+
+def test_baked_shading_is_removed_and_clipped_pixels_left_out():
+    """The same albedo seen on a lit and a shadowed side gives the same target; a clipped pixel is no target."""
+    lighting = PanoramaLighting.from_environment(make_procedural_environment("sky", width=128), height=16)
+    normal = torch.tensor([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.0, 0.0, 1.0]])
+    view = torch.nn.functional.normalize(torch.tensor([[1.0, 0.0, 1.0], [1.0, 0.0, -1.0], [1.0, 0.0, 1.0]]), dim=-1)
+    albedo = torch.tensor([[0.6, 0.5, 0.4]] * 3)
+    roughness, metallic = torch.full((3,), 0.6), torch.zeros(3)
+    with torch.no_grad():
+        photo = radiance_to_display_torch(shade(lighting, albedo, roughness, metallic, normal, view).radiance)
+    photo[2] = 1.0  # blown out
+    assert (photo[0] - photo[1]).abs().max() > 0.1  # the photo has the shading baked in
+    target, usable = delit_albedo(lighting, photo, roughness, metallic, normal, view)
+    assert usable.tolist() == [True, True, False]
+    torch.testing.assert_close(target[0], target[1], atol=0.01, rtol=0)
