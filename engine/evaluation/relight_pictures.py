@@ -11,7 +11,7 @@ import numpy as np
 
 from lirm.renderer.tonemap import tonemap
 
-from .relighting import scale_to_truth
+from .relighting import scale_to_truth, scored_pixels
 
 
 def write_relight_picture(path: Path, shown: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
@@ -19,7 +19,7 @@ def write_relight_picture(path: Path, shown: list[tuple[np.ndarray, np.ndarray, 
     """`shown`: (true radiance, true mask, predicted radiance, predicted mask) per view."""
     columns = []
     for true_radiance, true_mask, radiance, mask in shown:
-        region = (true_mask > 0.5) | (mask > 0.5)
+        region = scored_pixels(true_mask)
         scaled = scale_to_truth(radiance, true_radiance, region) if region.any() else radiance
         columns.append(np.concatenate([tonemap(np.asarray(true_radiance, np.float64), exposure_ev),
                                        tonemap(scaled, exposure_ev)], axis=0))

@@ -15,6 +15,9 @@ from .config import LossWeights
 from .ray_rendering import RayBatchRender
 
 
+CURVATURE_STEP = 0.01  # of the bounding radius: about a pixel's footprint at the protocol's 128 px
+
+
 def srgb_to_linear_torch(c: torch.Tensor) -> torch.Tensor:
     c = c.clamp(0.0, 1.0)
     return torch.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
@@ -48,7 +51,7 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
     if weights.material_prior:
         o = render.opacity.detach()
         terms["material_prior"] = ((render.roughness - 0.5 * o) ** 2 + render.metallic**2).mean()
-    if (weights.eikonal or weights.normal) and render.surface_points.shape[0]:
+    if (weights.eikonal or weights.normal or weights.curvature) and render.surface_points.shape[0]:
         points = render.surface_points
         if points.shape[0] > eikonal_points:
             points = points[torch.randint(0, points.shape[0], (eikonal_points,), generator=generator)]
@@ -57,6 +60,13 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
         probes = torch.cat([points, far.to(points)])
         gradient = sdf_gradients(field, probes, 0.5 * field.normal_eps)
         terms["eikonal"] = ((gradient.norm(dim=-1) - 1.0) ** 2).mean()
+        if weights.curvature:
+            # The surface's normal should change little over a short step: lumps a few views cannot
+            # see (they cost the relighting, where every bump catches the new light) are flattened.
+            step = torch.randn(points.shape[0], 3, generator=generator).to(points) * CURVATURE_STEP * field.radius
+            nearby = sdf_gradients(field, points + step, 0.5 * field.normal_eps)
+            here = gradient[: points.shape[0]]
+            terms["curvature"] = (1.0 - F.cosine_similarity(here, nearby, dim=-1)).mean()
         if weights.normal:
             predicted = field.sample(points[None]).normal[0]
             numerical = F.normalize(gradient[: points.shape[0]], dim=-1).detach()

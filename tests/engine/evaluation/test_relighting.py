@@ -35,9 +35,16 @@ def test_the_metrics_ignore_a_global_scale_and_see_errors():
     noisy = relight_metrics(truth * rng.uniform(0.8, 1.2, truth.shape), mask, truth, mask, 0.0)
     assert 10.0 < noisy["relight_psnr_l"] < 60.0 and noisy["relight_ssim"] < 1.0
     missing = np.zeros_like(mask)
-    missing[8:16, 8:24] = 1.0  # half the object not there: the union of the masks scores it
+    missing[8:16, 8:24] = 1.0  # half the object not there: the true mask's pixels score it
     half = truth * missing[..., None]  # a render is black where it has no surface
     assert relight_metrics(half, missing, truth, mask, 0.0)["relight_psnr_l"] < noisy["relight_psnr_l"]
+    # The silhouette's edge pixel is not scored (Stanford-ORB's margin), its inside is.
+    edge = truth.copy()
+    edge[8, 8:24] = 0.0
+    assert relight_metrics(edge, mask, truth, mask, 0.0)["relight_psnr_l"] > 200
+    inner = truth.copy()
+    inner[12, 8:24] = 0.0
+    assert relight_metrics(inner, mask, truth, mask, 0.0)["relight_psnr_l"] < 60
 
 
 @pytest.mark.slow
