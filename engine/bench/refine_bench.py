@@ -10,13 +10,14 @@ from __future__ import annotations
 import ast
 import json
 from dataclasses import fields, replace
+from pathlib import Path
 
 import numpy as np
 
 from lirm.engine.evaluation.evaluate import EvalConfig
 from lirm.engine.evaluation.heldout_sets import HeldoutObject
 from lirm.engine.evaluation.evaluate import score_field, update_scores
-from lirm.engine.evaluation.refined_rows import lirm_field, mean_of, per_object_scores, refine_inputs
+from lirm.engine.evaluation.refined_rows import MATERIAL_KEYS, lirm_field, mean_of, per_object_scores, refine_inputs
 from lirm.engine.refine import initial_fields
 from lirm.engine.refine.refinable_field import RefinableField
 from lirm.engine.refine.refiner import refine_field
@@ -55,21 +56,38 @@ def apply_options(config: RefineConfig, options: list[str]) -> RefineConfig:
 
 
 def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfig, base: RefineConfig, minutes: list[float],
-                     init: str, progress=None) -> dict:
+                     init: str, progress=None, pictures: Path | None = None) -> dict:
+    """With base.inverse_rendering, also the material and relighting scores (and, with `pictures`,
+    the relighting test's pictures there)."""
     meter = PeakMemory("cpu" if base.device == "cpu" else "cuda")
     budgets = []
+    relighter = None
+    if base.inverse_rendering:
+        from lirm.engine.evaluation.relighting import Relighter
+
+        relighter = Relighter(pictures=pictures)
+    keys = ("psnr", "ssim", "albedo_psnr", "chamfer", "seconds", "steps") + (MATERIAL_KEYS if relighter else ())
+    try:
+        _run_budgets(model, objects, eval_config, base, minutes, init, progress, meter, relighter, keys, budgets)
+    finally:
+        if relighter is not None:
+            relighter.release()
+    return {"init": init, "settings": base.to_dict(), "memory_method": meter.method, "budgets": budgets}
+
+
+def _run_budgets(model, objects, eval_config, base, minutes, init, progress, meter, relighter, keys, budgets) -> None:
     for k, budget in enumerate(minutes):
         if progress:
             progress(f"{budget:g} min", k, len(minutes))
         config = replace(base, minutes=budget)
+        if relighter is not None:
+            relighter.row = f"{init} {budget:g} min"
         release_memory(meter.device)
         meter.reset()
-        rows = per_object_scores(model, objects, eval_config, config, init)
-        budgets.append({"minutes": budget, "peak_bytes": meter.peak(), "objects": rows,
-                        **{key: mean_of(rows, key) for key in ("psnr", "ssim", "albedo_psnr", "chamfer", "seconds", "steps")}})
+        rows = per_object_scores(model, objects, eval_config, config, init, relighter)
+        budgets.append({"minutes": budget, "peak_bytes": meter.peak(), "objects": rows, **{key: mean_of(rows, key) for key in keys}})
     if progress:
         progress("done", len(minutes), len(minutes))
-    return {"init": init, "settings": base.to_dict(), "memory_method": meter.method, "budgets": budgets}
 
 
 def refine_bench_table(result: dict, set_name: str) -> str:
@@ -81,6 +99,12 @@ def refine_bench_table(result: dict, set_name: str) -> str:
     for b in result["budgets"]:
         lines.append(f"| {b['minutes']:g} | {b['psnr']:.2f} | {b['ssim']:.3f} | {b['albedo_psnr']:.2f} | {b['chamfer']:.4f} | "
                      f"{b['steps']:.0f} | {b['seconds']:.0f} | {b['peak_bytes'] / 1e9:.2f} |")
+    if result["budgets"] and "relight_psnr_l" in result["budgets"][0]:
+        lines += ["", "Materials (inverse rendering) and the relighting test:", "",
+                  "| budget (min) | roughness PSNR ↑ | metallic PSNR ↑ | relight PSNR-H ↑ | relight PSNR-L ↑ |", "|---|---|---|---|---|"]
+        for b in result["budgets"]:
+            lines.append(f"| {b['minutes']:g} | {b['roughness_psnr']:.2f} | {b['metallic_psnr']:.2f} | {b['relight_psnr_h']:.2f} | "
+                         f"{b['relight_psnr_l']:.2f} |")
     return "\n".join(lines) + "\n"
 
 

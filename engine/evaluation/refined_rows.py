@@ -101,18 +101,23 @@ def evaluate_refined(model, objects: list[HeldoutObject], config: EvalConfig, re
                       lighting_of(objects))
 
 
-def per_object_scores(model, objects: list[HeldoutObject], config: EvalConfig, refine: RefineConfig, init: str) -> list[dict]:
-    """One dict per object (for studies that pair objects across settings)."""
+MATERIAL_KEYS = ("roughness_psnr", "metallic_psnr", "relight_psnr_h", "relight_psnr_l")
+
+
+def per_object_scores(model, objects: list[HeldoutObject], config: EvalConfig, refine: RefineConfig, init: str,
+                      relighter=None) -> list[dict]:
+    """One dict per object (for studies that pair objects across settings); with a `relighter`, the
+    material and relighting scores too."""
     rows = []
     for obj in objects:
         field, seconds, steps = refine_object(model, obj, config.updates, refine, init)
         outputs = obj.protocol.outputs[:config.output_views] if config.output_views else obj.protocol.outputs
         scores: dict[str, list[float]] = {}
         with torch.no_grad():
-            score_field(field, obj, outputs, config, scores)
+            score_field(field, obj, outputs, config, scores, relighter=relighter)
         row = update_scores(config.updates, scores).to_dict()
-        rows.append({"object": obj.name, "seconds": seconds, "steps": steps,
-                     **{k: row[k] for k in ("psnr", "ssim", "albedo_psnr", "chamfer")}})
+        keys = ("psnr", "ssim", "albedo_psnr", "chamfer") + (MATERIAL_KEYS if relighter is not None else ())
+        rows.append({"object": obj.name, "seconds": seconds, "steps": steps, **{k: row[k] for k in keys}})
     return rows
 
 

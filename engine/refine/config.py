@@ -15,7 +15,7 @@ class LossWeights:
     colour: float = 1.0  # L1 on the radiance over white, against the masked photo
     mask: float = 0.1  # binary cross-entropy of the opacity against the mask
     eikonal: float = 0.05  # (|grad s| - 1)^2 at points near the surface
-    curvature: float = 0.0  # 1 - cos between the SDF's normals a short step apart (objective.CURVATURE_STEP)
+    curvature: float = 0.2  # 1 - cos between the SDF's normals a short step apart (objective.CURVATURE_STEP)
     normal: float = 0.02  # the MLP normal against the SDF's numerical normal (the paper's stage-3 term)
     albedo: float = 0.1  # albedo against the linearised observed colour (stand-in for inverse rendering)
     material_prior: float = 0.01  # roughness toward 0.5 and metallic toward 0 where nothing else says otherwise
@@ -24,7 +24,7 @@ class LossWeights:
     # shaded under the capture's lighting against the photo, the lighting held to what the photos'
     # backgrounds saw and smooth where they saw nothing.
     pbr: float = 0.5
-    albedo_delit: float = 0.5  # the albedo against the photo de-lit in closed form (objective.delit_albedo)
+    albedo_delit: float = 0.0  # the albedo against the photo de-lit in closed form (objective.delit_albedo); off: not worth it yet (README)
     light_seen: float = 0.2
     light_smooth: float = 0.02
 

@@ -26,6 +26,9 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--warm-start", action="store_true",
                         help="instead: refining again after new views, cold (from LIRM) for the first --minutes against warm "
                              "(from the earlier refinement) for 1/4, 1/2 and all of it")
+    parser.add_argument("--materials", action="store_true", help="inverse-render the materials (as `lirm refine --materials`) "
+                        "and also score roughness, metallic and the relighting test")
+    parser.add_argument("--pictures", type=Path, help="with --materials: the relighting test's pictures, per budget and object")
     parser.add_argument("--json", type=Path, help="also write every object's numbers here")
     parser.set_defaults(run=run)
 
@@ -37,11 +40,13 @@ def run(args: argparse.Namespace) -> int:
     from ...refine.config import refine_preset
 
     require_at_least_one(args, "objects", "output_views")
+    if args.pictures and not args.materials:
+        raise LirmUsageError("--pictures shows the relighting test, which only --materials runs; add --materials")
     require_range(args, "size", VIEW_SIZE, " pixels")
     if any(not m > 0 for m in args.minutes):
         raise LirmUsageError(f"--minutes must all be positive, got {args.minutes}")
     source = model_with_warning(args.checkpoint)
-    base = apply_options(refine_preset("default"), args.option)
+    base = apply_options(refine_preset("default", inverse_rendering=bool(args.materials)), args.option)
     args.updates = 4
     objects = heldout_objects(args)
     if args.warm_start:
@@ -58,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
         bar = view_progress_bar(len(args.minutes), "refinement budgets")
         try:
             result = run_refine_bench(source.model, objects, EvalConfig(output_views=args.output_views), base, args.minutes,
-                                      args.init, progress=bar_updater(bar))
+                                      args.init, progress=bar_updater(bar), pictures=args.pictures)
         finally:
             bar.close()
         table = refine_bench_table(result, args.set)

@@ -51,3 +51,26 @@ def test_baked_shading_is_removed_and_clipped_pixels_left_out():
     target, usable = delit_albedo(lighting, photo, roughness, metallic, normal, view)
     assert usable.tolist() == [True, True, False]
     torch.testing.assert_close(target[0], target[1], atol=0.01, rtol=0)
+
+
+def test_the_curvature_term_sees_bumps_and_not_a_smooth_sphere():
+    from lirm.engine.model.analytic_fields import SphereField
+    from lirm.engine.refine.config import LossWeights
+    from lirm.engine.refine.objective import batch_loss
+    from lirm.engine.refine.ray_rendering import RayBatchRender
+
+    class Bumpy(SphereField):
+        def sdf(self, points):
+            return super().sdf(points) + 0.01 * torch.sin(60.0 * points).prod(-1)
+
+    g = torch.Generator().manual_seed(0)
+    on_sphere = 0.5 * torch.nn.functional.normalize(torch.randn(256, 3, generator=g), dim=-1)
+    n = 8
+    render = RayBatchRender(torch.ones(n, 3), torch.ones(n), torch.zeros(n, 3), torch.zeros(n), torch.zeros(n),
+                            torch.zeros(n, 3), on_sphere, 0)
+    weights = LossWeights(colour=0.0, mask=0.0, eikonal=0.0, normal=0.0, albedo=0.0, material_prior=0.0, curvature=1.0)
+    curvature = {}
+    for name, field in (("smooth", SphereField(0.5)), ("bumpy", Bumpy(0.5))):
+        _, terms = batch_loss(field, render, torch.ones(n, 3), torch.ones(n), weights, 256, torch.Generator().manual_seed(1))
+        curvature[name] = terms["curvature"]
+    assert curvature["smooth"] < 1e-3 and curvature["bumpy"] > 10 * max(curvature["smooth"], 1e-4), curvature

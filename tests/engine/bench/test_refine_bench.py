@@ -1,0 +1,26 @@
+"""`lirm bench refine --materials`: the material and relighting columns, and the pictures."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from lirm.engine.cli import main
+
+
+@pytest.mark.slow
+def test_bench_refine_with_materials_scores_them_and_draws_the_relighting(tmp_path, capsys):
+    assert main(["bench", "refine", "--objects", "1", "--size", "48", "--output-views", "1", "--minutes", "0.05",
+                 "--init", "hull", "--materials", "--pictures", str(tmp_path / "pictures"), "--json", str(tmp_path / "r.json")]) == 0
+    table = capsys.readouterr().out
+    assert "| budget (min) | roughness PSNR ↑ | metallic PSNR ↑ | relight PSNR-H ↑ | relight PSNR-L ↑ |" in table
+    budget = json.loads((tmp_path / "r.json").read_text())["budgets"][0]
+    assert all(np.isfinite(budget[k]) for k in ("roughness_psnr", "metallic_psnr", "relight_psnr_h", "relight_psnr_l"))
+    assert [p.name for p in (tmp_path / "pictures").iterdir()] == ["hull_0.05_min__vase_0.png"]
+
+
+def test_bench_refine_pictures_need_materials(tmp_path, capsys):
+    assert main(["bench", "refine", "--objects", "1", "--pictures", str(tmp_path)]) != 0
+    assert "add --materials" in capsys.readouterr().err
