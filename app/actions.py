@@ -310,7 +310,9 @@ class AppActions:
                 self.state.say("refinement cancelled before it could keep anything; the reconstruction is as it was")
             if self.state.choices.view.channel == "field":
                 self.set_channel(previous_channel)
-        return self._start("refine", f"refinement {number} ({minutes:g} min)", args, done, cancel_grace=60.0)
+        # A cancelled refinement still saves its best state, renders its preview and writes the history;
+        # on a loaded machine that can take a while, and killing it then would lose the work.
+        return self._start("refine", f"refinement {number} ({minutes:g} min)", args, done, cancel_grace=180.0)
 
     def step_back(self, update: int) -> None:
         """Look at (and go on from) an earlier update; later ones stay until a new update replaces them."""

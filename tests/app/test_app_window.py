@@ -199,7 +199,7 @@ def test_refine_in_the_window_shows_the_field_as_it_fits(lego_capture, tmp_path,
         {"wait": "jobs", "timeout": 300}, {"screenshot": "03_refined"},
         {"action": "export", "args": [str(asset), 3000, 256, 64]}, {"wait": "jobs"},
         {"action": "run_refine", "args": [3]}, {"wait_file": str(live), "timeout": 300}, {"frames": 5},
-        {"action": "cancel", "args": ["refine"]}, {"wait": "jobs", "timeout": 180}, {"screenshot": "04_cancelled"},
+        {"action": "cancel", "args": ["refine"]}, {"wait": "jobs", "timeout": 300}, {"screenshot": "04_cancelled"},
         {"report_widgets": True},
         {"quit": True}]}
     proc, result_path = _start_app(script, tmp_path, x_display)
