@@ -68,26 +68,22 @@ def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfi
         relighter = Relighter(pictures=pictures)
     keys = ("psnr", "ssim", "albedo_psnr", "chamfer", "seconds", "steps") + (MATERIAL_KEYS if relighter else ())
     try:
-        _run_budgets(model, objects, eval_config, base, minutes, init, progress, meter, relighter, keys, budgets)
+        for k, budget in enumerate(minutes):
+            if progress:
+                progress(f"{budget:g} min", k, len(minutes))
+            config = replace(base, minutes=budget)
+            if relighter is not None:
+                relighter.row = f"{init} {budget:g} min"
+            release_memory(meter.device)
+            meter.reset()
+            rows = per_object_scores(model, objects, eval_config, config, init, relighter)
+            budgets.append({"minutes": budget, "peak_bytes": meter.peak(), "objects": rows, **{key: mean_of(rows, key) for key in keys}})
+        if progress:
+            progress("done", len(minutes), len(minutes))
     finally:
         if relighter is not None:
             relighter.release()
     return {"init": init, "settings": base.to_dict(), "memory_method": meter.method, "budgets": budgets}
-
-
-def _run_budgets(model, objects, eval_config, base, minutes, init, progress, meter, relighter, keys, budgets) -> None:
-    for k, budget in enumerate(minutes):
-        if progress:
-            progress(f"{budget:g} min", k, len(minutes))
-        config = replace(base, minutes=budget)
-        if relighter is not None:
-            relighter.row = f"{init} {budget:g} min"
-        release_memory(meter.device)
-        meter.reset()
-        rows = per_object_scores(model, objects, eval_config, config, init, relighter)
-        budgets.append({"minutes": budget, "peak_bytes": meter.peak(), "objects": rows, **{key: mean_of(rows, key) for key in keys}})
-    if progress:
-        progress("done", len(minutes), len(minutes))
 
 
 def refine_bench_table(result: dict, set_name: str) -> str:

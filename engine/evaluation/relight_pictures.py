@@ -14,11 +14,11 @@ from lirm.renderer.tonemap import tonemap
 from .relighting import scale_to_truth, scored_pixels
 
 
-def write_relight_picture(path: Path, shown: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+def write_relight_picture(path: Path, shown: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
                           exposure_ev: float, title: str) -> Path:
-    """`shown`: (true radiance, true mask, predicted radiance, predicted mask) per view."""
+    """`shown`: (true radiance, true mask, predicted radiance) per view."""
     columns = []
-    for true_radiance, true_mask, radiance, mask in shown:
+    for true_radiance, true_mask, radiance in shown:
         region = scored_pixels(true_mask)
         scaled = scale_to_truth(radiance, true_radiance, region) if region.any() else radiance
         columns.append(np.concatenate([tonemap(np.asarray(true_radiance, np.float64), exposure_ev),

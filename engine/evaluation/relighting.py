@@ -119,7 +119,7 @@ class Relighter:
                                                   lpips_net).items():
                     scores.setdefault(key, []).append(value)
                 if self.pictures is not None and len(shown) < PICTURE_VIEWS:
-                    shown.append((truth.radiance[i], truth.mask[i], out.radiance, out.mask))
+                    shown.append((truth.radiance[i], truth.mask[i], out.radiance))
         finally:
             scene.release()
         if shown:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lirm.renderer.tonemap import ACES_INPUT, ACES_OUTPUT, srgb_to_linear
+from lirm.renderer.tonemap import ACES_INPUT, ACES_OUTPUT
 
 RESPONSES = ("aces", "srgb")
 # The ACES fit's rational curve reaches 1 / 0.983729 only at infinite radiance; display values are
@@ -23,23 +23,15 @@ _CURVE_CAP = 0.999 / 0.983729
 
 
 def display_to_radiance(display: np.ndarray, response: str = "aces") -> np.ndarray:
-    """(..., 3) display sRGB in [0, 1] -> linear scene radiance (exposure 0)."""
-    if response not in RESPONSES:
-        raise ValueError(f"unknown camera response {response!r}; choose one of {', '.join(RESPONSES)}")
-    linear = srgb_to_linear(np.clip(display, 0.0, 1.0))
-    if response == "srgb":
-        return linear
-    y = np.clip(linear @ np.linalg.inv(ACES_OUTPUT).T, 0.0, _CURVE_CAP)
-    # Solve v (v + 0.0245786) - 0.000090537 = y (0.983729 v^2 + 0.4329510 v + 0.238081) for v >= 0.
-    a = 1.0 - 0.983729 * y
-    b = 0.0245786 - 0.4329510 * y
-    c = -(0.000090537 + 0.238081 * y)
-    v = (-b + np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))) / (2.0 * a)
-    return np.maximum(v @ np.linalg.inv(ACES_INPUT).T, 0.0)
+    """(..., 3) display sRGB in [0, 1] -> linear scene radiance (exposure 0), in float64."""
+    import torch
+
+    return display_to_radiance_torch(torch.from_numpy(np.asarray(display, np.float64)), response).numpy()
 
 
 def display_to_radiance_torch(display, response: str = "aces"):
-    """`display_to_radiance` in torch (no gradient is needed through it: it makes targets)."""
+    """(..., 3) display sRGB in [0, 1] -> linear scene radiance (exposure 0); the one implementation
+    (`display_to_radiance` is it on numpy arrays). No gradient is needed through it: it makes targets."""
     import torch
 
     if response not in RESPONSES:
@@ -51,6 +43,7 @@ def display_to_radiance_torch(display, response: str = "aces"):
     out_inverse = torch.as_tensor(np.linalg.inv(ACES_OUTPUT), dtype=d.dtype, device=d.device)
     in_inverse = torch.as_tensor(np.linalg.inv(ACES_INPUT), dtype=d.dtype, device=d.device)
     y = (linear @ out_inverse.T).clamp(0.0, _CURVE_CAP)
+    # Solve v (v + 0.0245786) - 0.000090537 = y (0.983729 v^2 + 0.4329510 v + 0.238081) for v >= 0.
     a = 1.0 - 0.983729 * y
     b = 0.0245786 - 0.4329510 * y
     c = -(0.000090537 + 0.238081 * y)

@@ -148,7 +148,8 @@ def estimate_capture_lighting(images: dict, masks: dict, cameras: dict, config: 
         landing = origins + directions * _distance_to_sphere(origins, directions, radius)[:, None]
         u, v = direction_to_equirect_uv(landing)
         texel = np.minimum((v * h).astype(np.int64), h - 1) * w + np.minimum((u * w).astype(np.int64), w - 1)
-        total += np.stack([np.bincount(texel, display_to_radiance(display, config.response)[:, c], h * w) for c in range(3)], 1)
+        radiance = display_to_radiance(display, config.response)
+        total += np.stack([np.bincount(texel, radiance[:, c], h * w) for c in range(3)], 1)
         count += np.bincount(texel, minlength=h * w)
         clipped += np.bincount(texel, (display >= config.clip_level).any(1).astype(np.float64), h * w)
         used += 1

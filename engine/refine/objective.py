@@ -38,7 +38,7 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
     terms: dict[str, torch.Tensor] = {}
     terms["colour"] = (render.colour - colours).abs().mean()
     if lighting is not None:
-        terms.update(inverse_rendering_terms(render, colours, alphas, lighting, directions))
+        terms.update(inverse_rendering_terms(render, colours, alphas, lighting, directions, delit=weights.albedo_delit > 0))
         weights = replace(weights, albedo=0.0)  # the albedo is fitted through the shading, not to the colour
     if weights.mask:
         opacity = render.opacity.clamp(1e-4, 1.0 - 1e-4)
@@ -79,7 +79,7 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
 
 
 def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alphas: torch.Tensor, lighting,
-                            directions: torch.Tensor) -> dict[str, torch.Tensor]:
+                            directions: torch.Tensor, delit: bool = False) -> dict[str, torch.Tensor]:
     """The PBR materials at the rays' surfaces shaded under `lighting` (the renderer's split-sum model),
     through the camera's tone curve, against the photo, where both say object; and the lighting's own
     terms (what the backgrounds saw, smoothness)."""
@@ -96,6 +96,8 @@ def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alpha
     normal, view = render.normal[solid], -directions[solid]
     shaded = shade(lighting, albedo, roughness, metallic, normal, view).radiance
     terms["pbr"] = (radiance_to_display_torch(shaded) - colours[solid]).abs().mean()
+    if not delit:  # its four extra shadings per ray are only worth paying for when the term counts
+        return terms
     target, usable = delit_albedo(lighting, colours[solid], roughness.detach(), metallic.detach(), normal.detach(), view)
     if usable.any():
         terms["albedo_delit"] = (albedo[usable] - target[usable]).abs().mean()
