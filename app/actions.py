@@ -306,6 +306,9 @@ class AppActions:
                 self._show_update(number)
             elif job.state == "failed":
                 self.state.say(f"refinement failed: {job.error_text()}", "error")
+            elif job.returncode is not None and job.returncode < 0:
+                self.state.say(f"refinement did not stop within {job.cancel_grace:.0f} s of Cancel and was killed; "
+                               f"the reconstruction is as it was", "warning")
             else:
                 self.state.say("refinement cancelled before it could keep anything; the reconstruction is as it was")
             if self.state.choices.view.channel == "field":

@@ -6,11 +6,13 @@ from __future__ import annotations
 
 import argparse
 import logging
+import signal
 import sys
 from pathlib import Path
 
 from lirm.renderer.context import GLContextError
 
+from . import progress_events
 from .commands import app, bench, capture, demo, export, reconstruct, refine, render, ship, suggest, train
 from .commands import eval as eval_
 from .errors import LirmResourceError, LirmUsageError, LirmUserError
@@ -39,7 +41,17 @@ MEMORY_OPTIONS = {
 }
 
 
+def listen_for_cancel() -> None:
+    """The app cancels its background jobs with SIGINT. A process started from the background of a
+    non-interactive shell (a script's `cmd &`, CI) inherits SIGINT ignored, and Python then installs no
+    KeyboardInterrupt handler, so the app's Cancel would be lost and the job only killed when its grace
+    ran out, losing the best state so far. A command the app runs always listens."""
+    if progress_events.enabled() and signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 def main(argv: list[str] | None = None) -> int:
+    listen_for_cancel()
     parser = build_parser()
     args = parser.parse_args(argv)  # bad usage: argparse prints it and exits with EXIT_USAGE (2)
     _configure_logging(args.verbose)
