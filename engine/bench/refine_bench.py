@@ -56,9 +56,10 @@ def apply_options(config: RefineConfig, options: list[str]) -> RefineConfig:
 
 
 def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfig, base: RefineConfig, minutes: list[float],
-                     init: str, progress=None, pictures: Path | None = None) -> dict:
+                     init: str, progress=None, pictures: Path | None = None, true_lighting: bool = False) -> dict:
     """With base.inverse_rendering, also the material and relighting scores (and, with `pictures`,
-    the relighting test's pictures there)."""
+    the relighting test's pictures there); `true_lighting`: the oracle lit by the inputs' true
+    environment instead of the estimate from their backgrounds."""
     meter = PeakMemory("cpu" if base.device == "cpu" else "cuda")
     budgets = []
     relighter = None
@@ -76,19 +77,21 @@ def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfi
                 relighter.row = f"{init} {budget:g} min"
             release_memory(meter.device)
             meter.reset()
-            rows = per_object_scores(model, objects, eval_config, config, init, relighter)
+            rows = per_object_scores(model, objects, eval_config, config, init, relighter, true_lighting)
             budgets.append({"minutes": budget, "peak_bytes": meter.peak(), "objects": rows, **{key: mean_of(rows, key) for key in keys}})
         if progress:
             progress("done", len(minutes), len(minutes))
     finally:
         if relighter is not None:
             relighter.release()
-    return {"init": init, "settings": base.to_dict(), "memory_method": meter.method, "budgets": budgets}
+    return {"init": init, "lighting": "truth" if true_lighting else "estimate", "settings": base.to_dict(),
+            "memory_method": meter.method, "budgets": budgets}
 
 
 def refine_bench_table(result: dict, set_name: str) -> str:
     first = result["budgets"][0]["objects"] if result["budgets"] else []
-    lines = [f"Refinement from {result['init']} on the {set_name} set, {len(first)} objects "
+    lit = " under the inputs' true lighting (oracle)" if result.get("lighting") == "truth" else ""
+    lines = [f"Refinement from {result['init']}{lit} on the {set_name} set, {len(first)} objects "
              f"({', '.join(r['object'] for r in first)}); means over objects:", "",
              "| budget (min) | PSNR ↑ | SSIM ↑ | albedo PSNR ↑ | CD ↓ | steps | seconds | peak memory (GB) |",
              "|---|---|---|---|---|---|---|---|"]

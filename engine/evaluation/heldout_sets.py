@@ -51,6 +51,9 @@ class HeldoutObject:
     mesh: tuple[np.ndarray, np.ndarray] | None = None  # the true surface as (vertices, faces), when known
     lit_by: str = ""  # the environment (and rotation) the input and output views were rendered under
     relight: RelightTruth | None = None  # the output views under an environment that lit none of the inputs
+    # The light of the inputs themselves, (environment, rotation_deg, exposure_ev), where known: for the
+    # bench's oracle runs (`lirm bench refine --lighting truth`), never for a method under test.
+    input_light: tuple | None = None
 
 
 def _render_object(renderer: PBRRenderer, name: str, model: LoadedModel, environment, rotation_deg: float, turn_deg: float,
@@ -80,7 +83,8 @@ def _render_object(renderer: PBRRenderer, name: str, model: LoadedModel, environ
         relight = render_relight_truth(renderer, meshes, transform, protocol.cameras, list(protocol.outputs), relight_environment,
                                        relight_rotation_deg, auto_exposure_ev(relight_environment))
     return HeldoutObject(name, protocol, views, surface, mesh=(vertices, faces),
-                         lit_by=f"{environment.name} (rotated {rotation_deg:.0f}°)", relight=relight)
+                         lit_by=f"{environment.name} (rotated {rotation_deg:.0f}°)", relight=relight,
+                         input_light=(environment, rotation_deg, auto_exposure_ev(environment)))
 
 
 def synthetic_heldout(renderer: PBRRenderer, count: int = 8, size: int = 128, seed: int = 0,

@@ -47,8 +47,9 @@ def lirm_field(model, obj: HeldoutObject, updates: int):
     return model.decode(state)
 
 
-def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig, init: str):
-    """(refined field, seconds, refinement steps) for one held-out object."""
+def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig, init: str, true_lighting=None):
+    """(refined field, seconds, refinement steps) for one held-out object. `true_lighting` (a
+    PBRRenderer): inverse-render under the inputs' true environment instead of the estimate (an oracle)."""
     sets = obj.protocol.input_sets[:updates]
     views = refine_inputs(obj, [i for s in sets for i in s])
     start = time.perf_counter()
@@ -63,7 +64,10 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
         refinable = initial_fields.scratch(model.config, resolution, refine.seed)
     else:
         raise ValueError(f"unknown init {init!r}")
-    lighting = input_lighting(obj, [i for s in sets for i in s], refine) if refine.inverse_rendering else None
+    lighting = None
+    if refine.inverse_rendering:
+        lighting = (oracle_lighting(obj, true_lighting) if true_lighting is not None
+                    else input_lighting(obj, [i for s in sets for i in s], refine))
     result = refine_field(refinable, views, refine, grid, lighting=lighting)
     return result.field.frozen_field(), time.perf_counter() - start, result.steps
 
@@ -81,6 +85,21 @@ def input_lighting(obj: HeldoutObject, indices: list[int], refine: RefineConfig)
     cameras = {i: chosen.cameras[k] for k, i in enumerate(indices)}
     estimate = estimate_capture_lighting(images, masks, cameras, CaptureLightingConfig(proxy_radius=50.0))
     return PanoramaLighting.from_capture_lighting(estimate, refine.lighting_height)
+
+
+def oracle_lighting(obj: HeldoutObject, renderer):
+    """The environment that really lit the inputs, as the renderer's own tables, held fixed."""
+    from lirm.engine.lighting.fixed_lighting import FixedLighting
+    from lirm.engine.lighting.lighting_tables import tables_from_lighting
+
+    if obj.input_light is None:
+        raise ValueError(f"{obj.name}: the light of its inputs is unknown (a real capture): no oracle lighting")
+    environment, rotation_deg, exposure_ev = obj.input_light
+    lighting = renderer.prepare_lighting(environment, rotation_deg=rotation_deg, intensity_ev=exposure_ev)
+    try:
+        return FixedLighting(tables_from_lighting(renderer, lighting))
+    finally:
+        lighting.maps.release()
 
 
 def evaluate_refined(model, objects: list[HeldoutObject], config: EvalConfig, refine: RefineConfig, init: str,
@@ -105,12 +124,14 @@ MATERIAL_KEYS = ("roughness_psnr", "metallic_psnr", "relight_psnr_h", "relight_p
 
 
 def per_object_scores(model, objects: list[HeldoutObject], config: EvalConfig, refine: RefineConfig, init: str,
-                      relighter=None) -> list[dict]:
+                      relighter=None, true_lighting: bool = False) -> list[dict]:
     """One dict per object (for studies that pair objects across settings); with a `relighter`, the
-    material and relighting scores too."""
+    material and relighting scores too; with `true_lighting` (and the relighter's renderer), the
+    oracle that knows the inputs' environment."""
     rows = []
     for obj in objects:
-        field, seconds, steps = refine_object(model, obj, config.updates, refine, init)
+        oracle = relighter.renderer if true_lighting and relighter is not None else None
+        field, seconds, steps = refine_object(model, obj, config.updates, refine, init, oracle)
         outputs = obj.protocol.outputs[:config.output_views] if config.output_views else obj.protocol.outputs
         scores: dict[str, list[float]] = {}
         with torch.no_grad():

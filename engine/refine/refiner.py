@@ -57,7 +57,7 @@ def _optimiser(refinable: RefinableField, config: RefineConfig, lighting=None) -
               {"params": list(refinable.heads.parameters()), "lr": config.head_lr, "base_lr": config.head_lr}]
     if refinable.panoramas is not None:
         groups.append({"params": [refinable.panoramas], "lr": config.nde_lr, "base_lr": config.nde_lr})
-    if lighting is not None:
+    if lighting is not None and list(lighting.parameters()):  # a fixed (known) lighting has nothing to fit
         groups.append({"params": list(lighting.parameters()), "lr": config.lighting_lr, "base_lr": config.lighting_lr})
     return torch.optim.Adam(groups, betas=(0.9, 0.99), eps=1e-15)
 

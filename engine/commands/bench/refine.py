@@ -29,6 +29,9 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--materials", action="store_true", help="inverse-render the materials (as `lirm refine --materials`) "
                         "and also score roughness, metallic and the relighting test")
     parser.add_argument("--pictures", type=Path, help="with --materials: the relighting test's pictures, per budget and object")
+    parser.add_argument("--lighting", choices=("estimate", "truth"), default="estimate",
+                        help="with --materials: inverse-render under the capture-style estimate from the inputs' backgrounds "
+                             "(default), or under the environment that really lit them (an oracle: what the estimate costs)")
     parser.add_argument("--json", type=Path, help="also write every object's numbers here")
     parser.set_defaults(run=run)
 
@@ -42,6 +45,10 @@ def run(args: argparse.Namespace) -> int:
     require_at_least_one(args, "objects", "output_views")
     if args.pictures and not args.materials:
         raise LirmUsageError("--pictures shows the relighting test, which only --materials runs; add --materials")
+    if args.lighting == "truth" and not args.materials:
+        raise LirmUsageError("--lighting truth lights the inverse rendering, which only --materials runs; add --materials")
+    if args.lighting == "truth" and args.warm_start:
+        raise LirmUsageError("--lighting truth is for the budget table, not --warm-start")
     require_range(args, "size", VIEW_SIZE, " pixels")
     if any(not m > 0 for m in args.minutes):
         raise LirmUsageError(f"--minutes must all be positive, got {args.minutes}")
@@ -63,7 +70,8 @@ def run(args: argparse.Namespace) -> int:
         bar = view_progress_bar(len(args.minutes), "refinement budgets")
         try:
             result = run_refine_bench(source.model, objects, EvalConfig(output_views=args.output_views), base, args.minutes,
-                                      args.init, progress=bar_updater(bar), pictures=args.pictures)
+                                      args.init, progress=bar_updater(bar), pictures=args.pictures,
+                                      true_lighting=args.lighting == "truth")
         finally:
             bar.close()
         table = refine_bench_table(result, args.set)

@@ -24,3 +24,8 @@ def test_bench_refine_with_materials_scores_them_and_draws_the_relighting(tmp_pa
 def test_bench_refine_pictures_need_materials(tmp_path, capsys):
     assert main(["bench", "refine", "--objects", "1", "--pictures", str(tmp_path)]) != 0
     assert "add --materials" in capsys.readouterr().err
+
+
+def test_bench_refine_true_lighting_needs_materials(capsys):
+    assert main(["bench", "refine", "--objects", "1", "--lighting", "truth"]) == 2
+    assert "add --materials" in capsys.readouterr().err
