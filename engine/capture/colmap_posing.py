@@ -112,7 +112,10 @@ class ColmapConfig:
     # Sub-models smaller than this are dropped by COLMAP (it keeps its first model whatever its size).
     min_model_size: int = 3
     seed: int = 0  # RANSAC seed for repeatable results; -1 for COLMAP's random seed
-    num_threads: int = -1  # feature extraction; -1: all cores
+    # Feature extraction on one thread: with more, COLMAP numbers the images in the order their
+    # features finish (8 fox photos: 0005 and 0006 swapped from one run to the next), and the image
+    # ids order the mapper's choices, so the same photos gave focal lengths 273.7 to 275.3 px.
+    num_threads: int = 1
     # Incremental mapping on one thread: with more, bundle adjustment sums in a varying order and the
     # same photos gave different poses and points from run to run (12 fox photos: 1985 against 2018
     # points, camera matrices up to 0.05 apart), and through them different automatic masks.

@@ -284,3 +284,32 @@ def test_a_view_whose_mask_runs_out_of_the_picture_is_used_and_named(tmp_path, s
     out = capsys.readouterr().out
     assert "network views prepared: 4" in out and "masks used with a warning: 4" in out
     assert out.count("runs out of the picture (left border)") == 4
+
+
+# ---- case 3: the same photos give the same capture, every time ---------------------------------------------
+@pytest.mark.slow
+def test_the_same_photos_give_the_same_poses_and_masks_in_every_run(tmp_path, shared_data):
+    """Three separate `lirm capture` processes on the same 8 fox photos (automatic masks) write
+    byte-identical cameras, masks and crops. With feature extraction on two threads COLMAP numbered
+    the images in the order they finished, and the same photos gave focal lengths 273.7-275.3 px,
+    and through the poses different automatic masks."""
+    import subprocess
+    import sys
+
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for p in sorted((shared_data / "real_instantngp_fox" / "images").glob("*.jpg"))[:8]:
+        shutil.copy(p, photos / p.name)
+    runs = []
+    for k in range(3):
+        out = tmp_path / f"capture_{k}"
+        done = subprocess.run([sys.executable, "-m", "lirm.engine.cli", "capture", str(photos), "-o", str(out),
+                               "--max-side", "400", "--size", "32"], capture_output=True, text=True)
+        assert done.returncode == 0, done.stdout + done.stderr
+        masks_line = next(line for line in done.stdout.splitlines() if "masks ok" in line)
+        runs.append(((out / "transforms.json").read_bytes(), _digest(out / "masks"), _digest(out / "prepared"),
+                     masks_line))
+    assert runs[0][3].strip().startswith("masks ok: 8 of 8"), runs[0][3]
+    for other in runs[1:]:
+        assert other[0] == runs[0][0]  # the same cameras, to the last bit
+        assert other[1] == runs[0][1] and other[2] == runs[0][2] and other[3] == runs[0][3]

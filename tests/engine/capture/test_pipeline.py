@@ -64,9 +64,8 @@ def test_messy_folder_gives_a_report_and_a_usable_capture(messy_folder, tmp_path
     for f in cake_ids:  # the unrelated object is reported, not silently dropped
         assert capture.frames[f].pose_status != "registered"
         assert capture.frames[f].record.original.name in report
-    # Automatic masks on the fox (a wall trophy in front of busy wallpaper) depend on COLMAP's
-    # non-repeatable run: some runs keep the wallpaper (open in issue 3). Every view without a
-    # prepared crop must then be named in the report with why.
+    # Automatic masks on the fox (a wall trophy in front of busy wallpaper) may take in some
+    # wallpaper; every view without a prepared crop must then be named in the report with why.
     prepared = {p.stem for p in (out / "prepared").glob("*.npz")}
     for f in fox_ids:
         if capture.frames[f].pose_status == "registered" and f not in prepared:
