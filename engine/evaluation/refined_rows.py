@@ -68,7 +68,7 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
     if refine.inverse_rendering:
         lighting = (oracle_lighting(obj, true_lighting) if true_lighting is not None
                     else input_lighting(obj, [i for s in sets for i in s], refine))
-    result = refine_field(refinable, views, refine, grid, lighting=lighting)
+    result = refine_field(refinable, views, refine, grid, lighting=lighting, start_has_materials=init == "lirm")
     return result.field.frozen_field(), time.perf_counter() - start, result.steps
 
 
@@ -120,7 +120,8 @@ def evaluate_refined(model, objects: list[HeldoutObject], config: EvalConfig, re
                       lighting_of(objects))
 
 
-MATERIAL_KEYS = ("roughness_psnr", "metallic_psnr", "relight_psnr_h", "relight_psnr_l")
+RELIGHT_KEYS = ("relight_psnr_h", "relight_psnr_l")
+MATERIAL_KEYS = ("roughness_psnr", "metallic_psnr") + RELIGHT_KEYS
 
 
 def per_object_scores(model, objects: list[HeldoutObject], config: EvalConfig, refine: RefineConfig, init: str,
@@ -137,7 +138,8 @@ def per_object_scores(model, objects: list[HeldoutObject], config: EvalConfig, r
         with torch.no_grad():
             score_field(field, obj, outputs, config, scores, relighter=relighter)
         row = update_scores(config.updates, scores).to_dict()
-        keys = ("psnr", "ssim", "albedo_psnr", "chamfer") + (MATERIAL_KEYS if relighter is not None else ())
+        keys = ("psnr", "ssim", "albedo_psnr", "roughness_psnr", "metallic_psnr", "chamfer") + (
+            RELIGHT_KEYS if relighter is not None else ())
         rows.append({"object": obj.name, "seconds": seconds, "steps": steps, **{k: row[k] for k in keys}})
     return rows
 

@@ -48,8 +48,8 @@ class FieldHeads(nn.Module):
 class FieldSample:
     sdf: torch.Tensor  # (B, N)
     albedo: torch.Tensor  # (B, N, 3) linear, in (0, 1)
-    roughness: torch.Tensor  # (B, N)
-    metallic: torch.Tensor  # (B, N)
+    roughness: torch.Tensor | None  # (B, N); None when sampled without materials
+    metallic: torch.Tensor | None  # (B, N)
     normal: torch.Tensor  # (B, N, 3) unit, predicted by MLP_n
     colour: torch.Tensor | None  # (B, N, 3) view-dependent radiance (None when no view directions)
 
@@ -88,7 +88,9 @@ class Field:
     def _sdf_bias(self, points: torch.Tensor) -> torch.Tensor:
         return points.norm(dim=-1) - self.config.sdf_bias_fraction * self.config.radius
 
-    def sample(self, points: torch.Tensor, view_dirs: torch.Tensor | None = None) -> FieldSample:
+    def sample(self, points: torch.Tensor, view_dirs: torch.Tensor | None = None, materials: bool = True) -> FieldSample:
+        """`materials=False` leaves roughness and metallic out (None): a fit of the radiance that does not
+        read them saves two of the seven heads at every sample."""
         f = self.features(points)
         h = self.heads
         normal = F.normalize(h.normal(f), dim=-1)
@@ -103,8 +105,8 @@ class Field:
         return FieldSample(
             sdf=h.sdf(f)[..., 0] + self._sdf_bias(points),
             albedo=torch.sigmoid(h.albedo(f)),
-            roughness=torch.sigmoid(h.roughness(f))[..., 0],
-            metallic=torch.sigmoid(h.metallic(f))[..., 0],
+            roughness=torch.sigmoid(h.roughness(f))[..., 0] if materials else None,
+            metallic=torch.sigmoid(h.metallic(f))[..., 0] if materials else None,
             normal=normal,
             colour=colour,
         )

@@ -165,7 +165,8 @@ def _refine_locked(capture_dir, source: ModelSource, config: RefineConfig, init:
         else:
             lighting = PanoramaLighting.from_capture_lighting(estimate, config.lighting_height)
     try:
-        result = refine_field(refinable, views, config, grid, progress, cancel, live, live_every, lighting=lighting)
+        result = refine_field(refinable, views, config, grid, progress, cancel, live, live_every, lighting=lighting,
+                              start_has_materials=started_from not in ("carved hull", "scratch"))
     finally:
         if live_path is not None:
             Path(live_path).unlink(missing_ok=True)

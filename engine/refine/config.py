@@ -20,6 +20,10 @@ class LossWeights:
     albedo: float = 0.1  # albedo against the linearised observed colour (stand-in for inverse rendering)
     material_prior: float = 0.01  # roughness toward 0.5 and metallic toward 0 where nothing else says otherwise
     plane_tv: float = 0.0  # total variation of the planes (sparse views at high plane resolution)
+    # The soft volume inside the surface, at points spread over the masks' hull: a steady push that
+    # the photos and masks resist where they see the surface; where no view does (an object's
+    # underside under views from above, a cup's inside under a cap), the smallest solid wins.
+    volume: float = 0.0
     # Inverse rendering (with RefineConfig.inverse_rendering and a lighting estimate): the PBR materials
     # shaded under the capture's lighting against the photo, the lighting held to what the photos'
     # backgrounds saw and smooth where they saw nothing.
@@ -60,6 +64,9 @@ class RefineConfig:
     pbr_start: float = 0.25
     lighting_lr: float = 3e-2
     lighting_height: int = 16  # the fitted panorama's rows (x 2 columns)
+    # The material prior holds roughness and metallic to the starting field's where that is a
+    # prediction (LIRM, an earlier refinement) rather than to 0.5 and 0 (README: what it was worth).
+    anchor_materials: bool = True
     losses: LossWeights = field(default_factory=LossWeights)
 
     def __post_init__(self) -> None:

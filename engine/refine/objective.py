@@ -4,6 +4,7 @@ material prior (weights in config.LossWeights; the README says what each was wor
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Callable
 
 import torch
 import torch.nn.functional as F
@@ -16,6 +17,7 @@ from .ray_rendering import RayBatchRender
 
 
 CURVATURE_STEP = 0.01  # of the bounding radius: about a pixel's footprint at the protocol's 128 px
+VOLUME_BAND = 0.02  # of the bounding radius: the soft step of the volume term (its push acts within this of the surface)
 
 
 def srgb_to_linear_torch(c: torch.Tensor) -> torch.Tensor:
@@ -33,8 +35,14 @@ def sdf_gradients(field, points: torch.Tensor, eps: float) -> torch.Tensor:
 
 def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: torch.Tensor, weights: LossWeights,
                eikonal_points: int, generator: torch.Generator, lighting=None,
-               directions: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, float]]:
-    """With `lighting` (a PanoramaLighting) and the rays' `directions`, the inverse-rendering terms too."""
+               directions: torch.Tensor | None = None,
+               material_anchor: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]] | None = None,
+               volume_points: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, float]]:
+    """With `lighting` (a PanoramaLighting) and the rays' `directions`, the inverse-rendering terms too.
+    `material_anchor` (points -> roughness, metallic): what the material prior holds the field to at
+    the surface points, e.g. the LIRM prediction the fit started from; without it the prior is the
+    constant roughness 0.5 and metallic 0 over each ray. `volume_points`: (K, 3) points spread over
+    where the object may be, for the volume term."""
     terms: dict[str, torch.Tensor] = {}
     terms["colour"] = (render.colour - colours).abs().mean()
     if lighting is not None:
@@ -48,7 +56,7 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
         # (as the carved hull colours its voxels): premultiplied like the render's albedo.
         target = srgb_to_linear_torch(colours) * render.opacity.detach()[:, None]
         terms["albedo"] = (render.albedo - target).abs().mean()
-    if weights.material_prior:
+    if weights.material_prior and material_anchor is None:
         o = render.opacity.detach()
         terms["material_prior"] = ((render.roughness - 0.5 * o) ** 2 + render.metallic**2).mean()
     if (weights.eikonal or weights.normal or weights.curvature) and render.surface_points.shape[0]:
@@ -67,10 +75,19 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
             nearby = sdf_gradients(field, points + step, 0.5 * field.normal_eps)
             here = gradient[: points.shape[0]]
             terms["curvature"] = (1.0 - F.cosine_similarity(here, nearby, dim=-1)).mean()
+        if weights.normal or (weights.material_prior and material_anchor is not None):
+            at_surface = field.sample(points[None])
         if weights.normal:
-            predicted = field.sample(points[None]).normal[0]
             numerical = F.normalize(gradient[: points.shape[0]], dim=-1).detach()
-            terms["normal"] = (1.0 - (predicted * numerical).sum(-1)).mean()
+            terms["normal"] = (1.0 - (at_surface.normal[0] * numerical).sum(-1)).mean()
+        if weights.material_prior and material_anchor is not None:
+            # Where the photos say nothing about the materials (a plain fit of the radiance), the
+            # prior's prediction is the best guess there is: keep it instead of a constant.
+            roughness, metallic = material_anchor(points)
+            terms["material_prior"] = ((at_surface.roughness[0] - roughness) ** 2 + (at_surface.metallic[0] - metallic) ** 2).mean()
+    if weights.volume and volume_points is not None and volume_points.shape[0]:
+        band = VOLUME_BAND * field.radius
+        terms["volume"] = torch.sigmoid(-field.sdf(volume_points[None])[0] / band).mean()
     if weights.plane_tv:
         planes = field.planes
         terms["plane_tv"] = ((planes[..., 1:, :] - planes[..., :-1, :]) ** 2).mean() + ((planes[..., 1:] - planes[..., :-1]) ** 2).mean()

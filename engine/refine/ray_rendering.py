@@ -29,8 +29,8 @@ class RayBatchRender:
     colour: torch.Tensor  # (N, 3) over the background
     opacity: torch.Tensor  # (N,)
     albedo: torch.Tensor  # (N, 3) premultiplied by opacity
-    roughness: torch.Tensor  # (N,) premultiplied
-    metallic: torch.Tensor  # (N,) premultiplied
+    roughness: torch.Tensor | None  # (N,) premultiplied; None when rendered without materials
+    metallic: torch.Tensor | None  # (N,) premultiplied
     normal: torch.Tensor  # (N, 3) the MLP normal, premultiplied
     surface_points: torch.Tensor  # (K, 3) detached fine samples with weight: where the eikonal term looks
     samples: int  # field evaluations with gradient in this batch
@@ -38,7 +38,8 @@ class RayBatchRender:
 
 def render_ray_batch(field, origins: torch.Tensor, directions: torch.Tensor, grid: OccupancyGrid | None, beta: float,
                      coarse_samples: int, fine_samples: int, generator: torch.Generator | None = None,
-                     background: float = 1.0) -> RayBatchRender:
+                     background: float = 1.0, materials: bool = True) -> RayBatchRender:
+    """`materials=False`: roughness and metallic are not rendered (None), for losses that do not read them."""
     n, device = origins.shape[0], origins.device
     near, far, hit = sphere_interval(origins, directions, field.radius)
     span = (far - near)[:, None]
@@ -65,7 +66,7 @@ def render_ray_batch(field, origins: torch.Tensor, directions: torch.Tensor, gri
     zeros1 = torch.zeros(n, device=device, dtype=origins.dtype)
     if points.shape[0] == 0:
         return RayBatchRender(zeros3 + background, zeros1, zeros3, zeros1, zeros1, zeros3, points.detach(), 0)
-    sample = field.sample(points[None], directions[ray_index][None])
+    sample = field.sample(points[None], directions[ray_index][None], materials=materials)
     sigma = torch.zeros(n, t_all.shape[1], device=device, dtype=origins.dtype)
     sigma = sigma.index_put(index, volsdf_density(sample.sdf[0], beta) / beta)
     alpha = 1.0 - torch.exp(-sigma * delta)
@@ -77,8 +78,10 @@ def render_ray_batch(field, origins: torch.Tensor, directions: torch.Tensor, gri
     opacity = composite1(torch.ones_like(weights))
     colour = composite(sample.colour[0]) + (1.0 - opacity)[:, None] * background
     near_surface = points.detach()[weights.detach() > 1e-3]
-    return RayBatchRender(colour, opacity, composite(sample.albedo[0]), composite1(sample.roughness[0]),
-                          composite1(sample.metallic[0]), composite(sample.normal[0]), near_surface, int(points.shape[0]))
+    roughness = composite1(sample.roughness[0]) if materials else None
+    metallic = composite1(sample.metallic[0]) if materials else None
+    return RayBatchRender(colour, opacity, composite(sample.albedo[0]), roughness, metallic, composite(sample.normal[0]),
+                          near_surface, int(points.shape[0]))
 
 
 def _occupied(origins, directions, t, hit, grid: OccupancyGrid | None) -> torch.Tensor:

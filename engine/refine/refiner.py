@@ -62,6 +62,33 @@ def _optimiser(refinable: RefinableField, config: RefineConfig, lighting=None) -
     return torch.optim.Adam(groups, betas=(0.9, 0.99), eps=1e-15)
 
 
+def _material_anchor(start, device: torch.device) -> Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]]:
+    """points -> (roughness, metallic) of the field the fit started from, held fixed."""
+    start.planes = start.planes.to(device)
+    start.heads.to(device)
+
+    @torch.no_grad()
+    def anchor(points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        sample = start.sample(points[None])
+        return sample.roughness[0], sample.metallic[0]
+
+    return anchor
+
+
+def _volume_points(grid: OccupancyGrid | None, config: RefineConfig, generator: torch.Generator,
+                   device: torch.device) -> torch.Tensor:
+    """Points spread uniformly over the sampling grid's occupied voxels (the whole bounding cube
+    without a grid), for the volume term."""
+    count = config.eikonal_points
+    if grid is None:
+        return (torch.rand(count, 3, generator=generator) * 2.0 - 1.0).to(device)
+    occupied = grid.occupied.nonzero()
+    voxels = occupied[torch.randint(0, occupied.shape[0], (count,), generator=generator)].to(torch.float32)
+    voxel = 2.0 * grid.radius / grid.resolution
+    points = -grid.radius + (voxels + torch.rand(count, 3, generator=generator)) * voxel  # [ix, iy, iz] -> x, y, z
+    return points.to(device)
+
+
 def _stage(fraction: float, stages: int) -> int:
     return min(int(fraction * stages), stages - 1)
 
@@ -70,10 +97,13 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
                  progress: Callable[[RefineTick], None] | None = None,
                  cancel: Callable[[], bool] | None = None,
                  live: Callable[[RefinableField], None] | None = None, live_every: float = 5.0,
-                 lighting=None) -> RefineResult:
+                 lighting=None, start_has_materials: bool = False) -> RefineResult:
     """`live`, when given, is called with the field as it is every `live_every` seconds (the app shows
     it while the fit runs). `lighting` (a PanoramaLighting), with config.inverse_rendering, turns on
-    the inverse rendering of the materials, fitting the lighting with them."""
+    the inverse rendering of the materials, fitting the lighting with them. `start_has_materials`: the
+    starting field's roughness and metallic are a prediction (a LIRM state or an earlier refinement),
+    so that with config.anchor_materials the material prior holds the field to them instead of to
+    constants; starts that know nothing of materials (the hull, scratch) leave it False."""
     device = torch.device(config.device)
     refinable.to(device)
     if not config.inverse_rendering:
@@ -83,6 +113,7 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
     generator = torch.Generator().manual_seed(config.seed)
     budget = None if config.minutes is None else 60.0 * config.minutes
     resolutions = config.plane_resolutions
+    anchor = _material_anchor(refinable.frozen_field(), device) if start_has_materials and config.anchor_materials else None
     refinable.resample_planes(resolutions[0])
     optimiser = _optimiser(refinable, config, lighting)
     stage = 0
@@ -120,11 +151,14 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
             origins, directions = views.origins[index].to(device), views.directions[index].to(device)
             colours, alphas = views.colours[index].to(device), views.alphas[index].to(device)
             field_ = refinable.field()
-            render = render_ray_batch(field_, origins, directions, grid, 1.0 / inv_beta, config.coarse_samples,
-                                      config.fine_samples, generator)
             shading = lighting if lighting is not None and fraction >= config.pbr_start else None
+            # Roughness and metallic along the rays only where a loss reads them there.
+            materials = shading is not None or (anchor is None and config.losses.material_prior > 0)
+            render = render_ray_batch(field_, origins, directions, grid, 1.0 / inv_beta, config.coarse_samples,
+                                      config.fine_samples, generator, materials=materials)
             loss, terms = batch_loss(field_, render, colours, alphas, config.losses, config.eikonal_points, generator,
-                                     shading, directions)
+                                     shading, directions, anchor,
+                                     _volume_points(grid, config, generator, device) if config.losses.volume else None)
             optimiser.zero_grad(set_to_none=True)
             loss.backward()
             optimiser.step()

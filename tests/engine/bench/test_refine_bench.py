@@ -15,7 +15,8 @@ def test_bench_refine_with_materials_scores_them_and_draws_the_relighting(tmp_pa
     assert main(["bench", "refine", "--objects", "1", "--size", "48", "--output-views", "1", "--minutes", "0.05",
                  "--init", "hull", "--materials", "--pictures", str(tmp_path / "pictures"), "--json", str(tmp_path / "r.json")]) == 0
     table = capsys.readouterr().out
-    assert "| budget (min) | roughness PSNR ↑ | metallic PSNR ↑ | relight PSNR-H ↑ | relight PSNR-L ↑ |" in table
+    assert "| budget (min) | PSNR ↑ | SSIM ↑ | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ | CD ↓ |" in table
+    assert "| budget (min) | relight PSNR-H ↑ | relight PSNR-L ↑ |" in table
     budget = json.loads((tmp_path / "r.json").read_text())["budgets"][0]
     assert all(np.isfinite(budget[k]) for k in ("roughness_psnr", "metallic_psnr", "relight_psnr_h", "relight_psnr_l"))
     assert [p.name for p in (tmp_path / "pictures").iterdir()] == ["hull_0.05_min__vase_0.png"]

@@ -4,6 +4,8 @@ cancelled, stay inside the masks' hull, and round-trip through the refined-state
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -80,6 +82,26 @@ def test_refinement_lowers_its_loss_and_learns_the_silhouette(sphere_views):
     field = result.field.frozen_field()
     sdf = field.sdf(torch.tensor([[[0.0, 0.0, 0.0], [0.0, 0.0, 0.9]]]))[0]
     assert sdf[0] < 0 < sdf[1]
+
+
+def test_a_predicted_material_is_kept_where_the_photos_say_nothing(sphere_views):
+    """A plain fit (radiance only) cannot see roughness or metallic: the prior's prediction it started
+    from is kept (start_has_materials), where a start that knows nothing is pulled to 0.5 and 0."""
+    hull = initial_fields.masks_hull(sphere_views, 32, 1.0)
+    grid = initial_fields.sampling_grid(hull, 1.0, 1)
+    surface = 0.5 * torch.nn.functional.normalize(torch.randn(1, 256, 3, generator=torch.Generator().manual_seed(0)), dim=-1)
+    config = replace(SMALL, head_lr=3e-2, losses=replace(SMALL.losses, material_prior=1.0))
+    roughness = {}
+    for anchored in (True, False):
+        start = _tiny_field(seed=4)
+        with torch.no_grad():  # a prediction of glossy metal everywhere
+            start.heads.roughness[-1].bias.fill_(-2.0)
+            start.heads.metallic[-1].bias.fill_(2.0)
+        result = refine_field(start, sphere_views, config, grid, start_has_materials=anchored)
+        sample = result.field.frozen_field().sample(surface)
+        roughness[anchored] = (float(sample.roughness.mean()), float(sample.metallic.mean()))
+    assert roughness[True][0] < 0.2 and roughness[True][1] > 0.8, roughness
+    assert roughness[False][0] > roughness[True][0] + 0.1 and roughness[False][1] < roughness[True][1] - 0.2, roughness
 
 
 def test_cancel_keeps_the_state_reached(sphere_views):
