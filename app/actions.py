@@ -291,6 +291,8 @@ class AppActions:
         live.parent.mkdir(parents=True, exist_ok=True)
         args = ["refine", str(self.state.capture_dir), "--minutes", f"{minutes:g}", "--novel-views", "1", "--render-size", "64",
                 "--grid-resolution", "64", "--live", str(live), "--live-every", "4", *self._ckpt()]
+        if self.state.choices.refine_materials:
+            args.append("--materials")
         previous_channel = self.state.choices.view.channel
         self.set_channel("field")  # the field as it fits; the mesh preview follows when it is done
 

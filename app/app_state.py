@@ -77,6 +77,9 @@ class SavedChoices:
     export: ExportSettings = field(default_factory=ExportSettings)
     auto_update: bool = False
     refine_minutes: float = 3.0
+    # Refine inverse-renders the materials under the capture's lighting (`lirm refine --materials`):
+    # the asset is for relighting, and a plain fit bakes the photos' shading into the albedo.
+    refine_materials: bool = True
 
 
 @dataclass
@@ -197,6 +200,7 @@ class AppState:
         out.viewing_update = take(data, "viewing_update", "update looked at", _optional_count, defaults.viewing_update)
         out.auto_update = take(data, "auto_update", "automatic updates", _bool, defaults.auto_update)
         out.refine_minutes = take(data, "refine_minutes", "refinement minutes", _positive_number, defaults.refine_minutes)
+        out.refine_materials = take(data, "refine_materials", "refinement of the materials", _bool, defaults.refine_materials)
         view = take(data, "view", "viewport settings", _section, {})
         v, dv = out.view, defaults.view
         v.channel = take(view, "channel", "viewport channel", lambda x: _one_of(x, CHANNELS), dv.channel)

@@ -46,6 +46,10 @@ class DemoConfig:
     export_faces: int = 20_000
     export_texture: int = 512
     refine_minutes: float | None = 3.0  # per-scene refinement before the export (None: export the LIRM state as is)
+    # Inverse-render the materials under the shoot's estimated lighting (`lirm refine --materials`):
+    # the demo relights its asset, and a plain radiance fit bakes the sky's shading into the albedo
+    # (the label side, in shadow in the photos, came out dark and barely readable; README).
+    refine_materials: bool = True
     # The built-in mug stated as a real one (a typical mug's height), so that the demo's exports are
     # in metres with the base on y = 0, as a user's are after `lirm capture --real-size`.
     real_height_m: float | None = 0.095
@@ -143,8 +147,10 @@ def _reconstruct_and_export(capture_dir: Path, asset_path: Path, config: DemoCon
         from .reconstruction.refine_step import run_refine
         from .refine.config import refine_preset
 
-        say(f"refining the reconstruction on all the views for {config.refine_minutes:g} minutes")
-        refined = run_refine(capture_dir, source, refine_preset("default", minutes=config.refine_minutes), render=pictures)
+        what = " with the materials under the photos' lighting" if config.refine_materials else ""
+        say(f"refining the reconstruction on all the views for {config.refine_minutes:g} minutes{what}")
+        refine = refine_preset("default", minutes=config.refine_minutes, inverse_rendering=config.refine_materials)
+        refined = run_refine(capture_dir, source, refine, render=pictures)
         say(f"refinement: {refined.steps} steps in {refined.seconds:.0f} s from {refined.started_from}")
     if config.real_height_m:
         from .capture.real_size import set_real_size

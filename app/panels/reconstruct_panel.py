@@ -43,6 +43,13 @@ class ReconstructPanel:
         if changed:
             state.choices.refine_minutes = round(minutes * 2) / 2
             state.save_choices()
+        changed, materials = imgui.checkbox("refine the materials too (for relighting)", state.choices.refine_materials)
+        if changed:
+            state.choices.refine_materials = materials
+            state.save_choices()
+        if imgui.is_item_hovered(imgui.HoveredFlags_.for_tooltip):
+            imgui.set_tooltip("Refine also inverse-renders albedo, roughness and metallic under the lighting the photos\n"
+                              "were taken in, so the asset relights without the photos' shading baked in.")
         imgui.end_disabled()
         changed, auto = imgui.checkbox("updates automatically as views arrive", state.choices.auto_update)
         if changed:

@@ -161,7 +161,7 @@ def write_guidance(folder: Path, result: CaptureSuggestions) -> dict[str, Path]:
                     "look_at": list(s.look_at), "gain": s.gain, "new_coverage": s.new_coverage, "sentence": s.sentence,
                     "camera": s.camera.to_dict()}
                    for n, s in enumerate(result.suggestions, start=1)]
-    config = CandidateConfig()
+    config = result.candidates  # the rows the heat map has (no views from below an object that stands on something)
     json_path = atomic_write_json(folder / "suggestions.json", {
         "surface": result.surface, "coverage_now": result.coverage_before, "coverage_after": result.coverage_after,
         "notes": result.notes, "suggestions": suggestions,

@@ -115,6 +115,8 @@ def test_a_whole_session_in_the_window(tmp_path, x_display):
     assert (capture / "guidance" / "suggestions.json").is_file()
     messages = [m["text"] for m in result["messages"]]
     assert any(m.startswith("guidance: covered") for m in messages) and any(m.startswith("exported") for m in messages)
+    # No panel failed on the way (a guidance heat map without the rows below the object once did).
+    assert not [m["text"] for m in result["messages"] if m["level"] == "error"], messages
     from lirm.engine.export.gltf_validation import validate_gltf
 
     report = validate_gltf(asset)
@@ -214,6 +216,9 @@ def test_refine_in_the_window_shows_the_field_as_it_fits(lego_capture, tmp_path,
     assert [u.get("kind", "update") for u in updates] == ["update", "refine", "refine"]
     assert updates[1]["started_from"] in ("LIRM update 1", "carved hull") and updates[2]["started_from"] == "refinement 2 (warm start)"
     assert not live.exists()  # the live state is gone once the refinement ends
+    # Refine inverse-renders the materials by default (the app's "materials" box, on).
+    refined = json.loads((capture / "reconstruction" / "update_02" / "refine.json").read_text())
+    assert refined["settings"]["inverse_rendering"] is True
     from lirm.engine.export.gltf_validation import validate_gltf
 
     assert validate_gltf(asset).errors == 0
