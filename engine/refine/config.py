@@ -24,6 +24,9 @@ class LossWeights:
     # the photos and masks resist where they see the surface; where no view does (an object's
     # underside under views from above, a cup's inside under a cap), the smallest solid wins.
     volume: float = 0.0
+    # Below the lowest surface the photos see, the SDF at least the height under it (unseen_floor.py):
+    # the wedge the masks' hull leaves under an object photographed from above (README: its worth).
+    floor: float = 0.5
     # Inverse rendering (with RefineConfig.inverse_rendering and a lighting estimate): the PBR materials
     # shaded under the capture's lighting against the photo, the lighting held to what the photos'
     # backgrounds saw and smooth where they saw nothing.
@@ -44,7 +47,10 @@ class RefineConfig:
     coarse_samples: int = 48  # uniform samples per ray, SDF only and no gradient, to find the surface
     fine_samples: int = 24  # samples per ray drawn around the surface the coarse pass found
     plane_resolutions: tuple[int, ...] = (64, 128, 192)  # coarse to fine, switched at equal shares of the budget
-    inv_beta: tuple[float, float] = (40.0, 250.0)  # 1/beta from, to (reached at `beta_ramp` of the budget)
+    # 1/beta from, to (reached at `beta_ramp` of the budget). It ends sharper than the renderer's 250:
+    # at 250 the density reaching a few beta outside the zero level made the fit shrink the surface by
+    # about 0.011 R to match the masks (README: what 500 and 1000 were worth).
+    inv_beta: tuple[float, float] = (40.0, 500.0)
     beta_ramp: float = 0.6
     plane_lr: float = 2e-2
     nde_lr: float = 1e-2
@@ -62,6 +68,8 @@ class RefineConfig:
     # renderer's split-sum shading, from `pbr_start` of the budget on (the shape settles first).
     inverse_rendering: bool = False
     pbr_start: float = 0.25
+    # The floor term (losses.floor) from this share of the budget on; its height is followed from the start.
+    floor_start: float = 0.2
     lighting_lr: float = 3e-2
     lighting_height: int = 16  # the fitted panorama's rows (x 2 columns)
     # The material prior holds roughness and metallic to the starting field's where that is a

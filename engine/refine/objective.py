@@ -37,12 +37,14 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
                eikonal_points: int, generator: torch.Generator, lighting=None,
                directions: torch.Tensor | None = None,
                material_anchor: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]] | None = None,
-               volume_points: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, float]]:
+               volume_points: torch.Tensor | None = None, floor=None,
+               floor_points: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, float]]:
     """With `lighting` (a PanoramaLighting) and the rays' `directions`, the inverse-rendering terms too.
     `material_anchor` (points -> roughness, metallic): what the material prior holds the field to at
     the surface points, e.g. the LIRM prediction the fit started from; without it the prior is the
     constant roughness 0.5 and metallic 0 over each ray. `volume_points`: (K, 3) points spread over
-    where the object may be, for the volume term."""
+    where the object may be, for the volume term. `floor` (unseen_floor.UnseenFloor) and its
+    `floor_points` below it: the floor term."""
     terms: dict[str, torch.Tensor] = {}
     terms["colour"] = (render.colour - colours).abs().mean()
     if lighting is not None:
@@ -88,6 +90,8 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
     if weights.volume and volume_points is not None and volume_points.shape[0]:
         band = VOLUME_BAND * field.radius
         terms["volume"] = torch.sigmoid(-field.sdf(volume_points[None])[0] / band).mean()
+    if weights.floor and floor is not None and floor_points is not None:
+        terms["floor"] = floor.loss(field, floor_points)
     if weights.plane_tv:
         planes = field.planes
         terms["plane_tv"] = ((planes[..., 1:, :] - planes[..., :-1, :]) ** 2).mean() + ((planes[..., 1:] - planes[..., :-1]) ** 2).mean()

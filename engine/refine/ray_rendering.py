@@ -32,6 +32,7 @@ class RayBatchRender:
     roughness: torch.Tensor | None  # (N,) premultiplied; None when rendered without materials
     metallic: torch.Tensor | None  # (N,) premultiplied
     normal: torch.Tensor  # (N, 3) the MLP normal, premultiplied
+    depth: torch.Tensor  # (N,) the distance along the ray, premultiplied (detached: where the photos see a surface)
     surface_points: torch.Tensor  # (K, 3) detached fine samples with weight: where the eikonal term looks
     samples: int  # field evaluations with gradient in this batch
 
@@ -65,7 +66,7 @@ def render_ray_batch(field, origins: torch.Tensor, directions: torch.Tensor, gri
     zeros3 = torch.zeros(n, 3, device=device, dtype=origins.dtype)
     zeros1 = torch.zeros(n, device=device, dtype=origins.dtype)
     if points.shape[0] == 0:
-        return RayBatchRender(zeros3 + background, zeros1, zeros3, zeros1, zeros1, zeros3, points.detach(), 0)
+        return RayBatchRender(zeros3 + background, zeros1, zeros3, zeros1, zeros1, zeros3, zeros1, points.detach(), 0)
     sample = field.sample(points[None], directions[ray_index][None], materials=materials)
     sigma = torch.zeros(n, t_all.shape[1], device=device, dtype=origins.dtype)
     sigma = sigma.index_put(index, volsdf_density(sample.sdf[0], beta) / beta)
@@ -80,8 +81,9 @@ def render_ray_batch(field, origins: torch.Tensor, directions: torch.Tensor, gri
     near_surface = points.detach()[weights.detach() > 1e-3]
     roughness = composite1(sample.roughness[0]) if materials else None
     metallic = composite1(sample.metallic[0]) if materials else None
+    depth = zeros1.index_add(0, ray_index, weights.detach() * t_all[occupied])
     return RayBatchRender(colour, opacity, composite(sample.albedo[0]), roughness, metallic, composite(sample.normal[0]),
-                          near_surface, int(points.shape[0]))
+                          depth, near_surface, int(points.shape[0]))
 
 
 def _occupied(origins, directions, t, hit, grid: OccupancyGrid | None) -> torch.Tensor:

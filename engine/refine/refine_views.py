@@ -28,6 +28,7 @@ class RefineViews:
     colours: torch.Tensor  # (V*H*W, 3)
     alphas: torch.Tensor  # (V*H*W,)
     edge_index: torch.Tensor  # flat indices of the pixels within 2 px of a mask edge
+    pixel_angles: torch.Tensor  # (V*H*W,) the angle one pixel spans (1 / focal length): its footprint over distance
 
     @property
     def count(self) -> int:
@@ -46,11 +47,12 @@ class RefineViews:
         if not np.isfinite(images).all() or not np.isfinite(masks).all():
             raise LirmUserError("the views hold NaN or infinite pixels; re-prepare the capture (lirm capture --resume)")
         images, masks = np.clip(images, 0.0, 1.0), np.clip(masks, 0.0, 1.0)
-        origins, directions, edges = [], [], []
+        origins, directions, edges, angles = [], [], [], []
         offset = 0
         for camera, mask in zip(cameras, masks):
             o, d = camera.pixel_rays()
             origins.append(o.reshape(-1, 3))
+            angles.append(np.full(mask.size, 1.0 / np.sqrt(camera.fx * camera.fy)))
             directions.append(d.reshape(-1, 3))
             binary = (mask > 0.5).astype(np.uint8)
             kernel = np.ones((5, 5), np.uint8)
@@ -60,7 +62,7 @@ class RefineViews:
         as_tensor = lambda a: torch.from_numpy(np.ascontiguousarray(np.concatenate(a), dtype=np.float32))  # noqa: E731
         return cls(list(names), list(cameras), images, masks, as_tensor(origins), as_tensor(directions),
                    torch.from_numpy(images.reshape(-1, 3).copy()), torch.from_numpy(masks.reshape(-1).copy()),
-                   torch.from_numpy(np.concatenate(edges).astype(np.int64)))
+                   torch.from_numpy(np.concatenate(edges).astype(np.int64)), as_tensor(angles))
 
     @classmethod
     def from_prepared(cls, views: list) -> "RefineViews":

@@ -24,6 +24,7 @@ from .objective import batch_loss
 from .ray_rendering import render_ray_batch
 from .refinable_field import RefinableField
 from .refine_views import RefineViews
+from .unseen_floor import UnseenFloor
 
 
 @dataclass
@@ -114,6 +115,7 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
     budget = None if config.minutes is None else 60.0 * config.minutes
     resolutions = config.plane_resolutions
     anchor = _material_anchor(refinable.frozen_field(), device) if start_has_materials and config.anchor_materials else None
+    floor = UnseenFloor(grid, refinable.config.radius) if config.losses.floor else None
     refinable.resample_planes(resolutions[0])
     optimiser = _optimiser(refinable, config, lighting)
     stage = 0
@@ -156,9 +158,14 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
             materials = shading is not None or (anchor is None and config.losses.material_prior > 0)
             render = render_ray_batch(field_, origins, directions, grid, 1.0 / inv_beta, config.coarse_samples,
                                       config.fine_samples, generator, materials=materials)
+            if floor is not None:
+                floor.observe(origins, directions, render.depth, render.opacity.detach(), alphas,
+                              views.pixel_angles[index].to(device), 1.0 / inv_beta)
+            carve = floor is not None and fraction >= config.floor_start
             loss, terms = batch_loss(field_, render, colours, alphas, config.losses, config.eikonal_points, generator,
                                      shading, directions, anchor,
-                                     _volume_points(grid, config, generator, device) if config.losses.volume else None)
+                                     _volume_points(grid, config, generator, device) if config.losses.volume else None,
+                                     floor, floor.points_below(config.eikonal_points, generator, device) if carve else None)
             optimiser.zero_grad(set_to_none=True)
             loss.backward()
             optimiser.step()
@@ -170,7 +177,8 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
             ema_mse = mse if ema_mse is None else 0.9 * ema_mse + 0.1 * mse
             if step % config.best_every == 0:
                 history.append({"step": step, "seconds": round(time.perf_counter() - start, 2), "loss": ema_loss,
-                                "resolution": refinable.resolution, "inv_beta": inv_beta, **terms})
+                                "resolution": refinable.resolution, "inv_beta": inv_beta, **terms,
+                                **({"floor_height": floor.height} if floor is not None and floor.height is not None else {})})
                 # Only the last resolution's states are candidates: an earlier, coarser best would
                 # throw away the detail the finer planes are there for.
                 if ema_loss < best[0] and stage == len(resolutions) - 1:

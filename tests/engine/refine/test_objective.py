@@ -67,7 +67,7 @@ def test_the_curvature_term_sees_bumps_and_not_a_smooth_sphere():
     on_sphere = 0.5 * torch.nn.functional.normalize(torch.randn(256, 3, generator=g), dim=-1)
     n = 8
     render = RayBatchRender(torch.ones(n, 3), torch.ones(n), torch.zeros(n, 3), torch.zeros(n), torch.zeros(n),
-                            torch.zeros(n, 3), on_sphere, 0)
+                            torch.zeros(n, 3), torch.zeros(n), on_sphere, 0)
     weights = LossWeights(colour=0.0, mask=0.0, eikonal=0.0, normal=0.0, albedo=0.0, material_prior=0.0, curvature=1.0)
     curvature = {}
     for name, field in (("smooth", SphereField(0.5)), ("bumpy", Bumpy(0.5))):
