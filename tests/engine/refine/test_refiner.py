@@ -16,7 +16,6 @@ from lirm.engine.model.analytic_fields import SphereField
 from lirm.engine.model.config import preset
 from lirm.engine.model.field_state import load_field, load_field_state, save_field_state
 from lirm.engine.model.lirm import LIRM
-from lirm.engine.model.volume_renderer import VolumeRenderConfig, render_camera
 from lirm.engine.refine import initial_fields
 from lirm.engine.refine.config import RefineConfig, refine_preset
 from lirm.engine.refine.ray_rendering import render_ray_batch
@@ -29,16 +28,9 @@ SMALL = RefineConfig(minutes=None, iterations=40, rays_per_step=384, coarse_samp
 
 
 @pytest.fixture(scope="module")
-def sphere_views() -> RefineViews:
+def sphere_views(analytic_views) -> RefineViews:
     """6 views of a checkered sphere of radius 0.5, 32 px."""
-    truth = SphereField(sphere_radius=0.5)
-    cameras = orbit_cameras(6, 20.0, 2.6, 32, 32, 50.0)
-    images, masks = [], []
-    for camera in cameras:
-        out = render_camera(truth, camera, VolumeRenderConfig(samples_per_ray=128, numerical_normals=False))
-        images.append(np.clip(out["colour"], 0, 1))
-        masks.append(out["opacity"])
-    return RefineViews.build([f"v{i}" for i in range(6)], cameras, np.stack(images), np.stack(masks))
+    return analytic_views(SphereField(sphere_radius=0.5), orbit_cameras(6, 20.0, 2.6, 32, 32, 50.0))
 
 
 def _tiny_field(seed: int = 0) -> RefinableField:

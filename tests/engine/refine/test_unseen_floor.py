@@ -6,14 +6,12 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-import numpy as np
 import pytest
 import torch
 
 from lirm.engine.cameras import orbit_cameras
 from lirm.engine.model.analytic_fields import BoxField
 from lirm.engine.model.config import preset
-from lirm.engine.model.volume_renderer import VolumeRenderConfig, render_camera
 from lirm.engine.refine import initial_fields
 from lirm.engine.refine.config import LossWeights, RefineConfig
 from lirm.engine.refine.ray_rendering import render_ray_batch
@@ -30,16 +28,9 @@ class Box(BoxField):
 
 
 @pytest.fixture(scope="module")
-def box_views() -> RefineViews:
+def box_views(analytic_views) -> RefineViews:
     """8 views of a box from 30 degrees above the horizon, 64 px: its underside is never seen."""
-    truth = Box(half=(0.4, 0.3, -BOTTOM))
-    cameras = orbit_cameras(8, 30.0, 2.6, 64, 64, 50.0)
-    images, masks = [], []
-    for camera in cameras:
-        out = render_camera(truth, camera, VolumeRenderConfig(samples_per_ray=128, numerical_normals=False))
-        images.append(np.clip(out["colour"], 0, 1))
-        masks.append(out["opacity"])
-    return RefineViews.build([f"v{i}" for i in range(8)], cameras, np.stack(images), np.stack(masks))
+    return analytic_views(Box(half=(0.4, 0.3, -BOTTOM)), orbit_cameras(8, 30.0, 2.6, 64, 64, 50.0))
 
 
 def _grid(views):
