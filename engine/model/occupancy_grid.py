@@ -59,6 +59,13 @@ class OccupancyGrid:
             occupied[start:start + config.chunk] = (alpha >= config.alpha_threshold).cpu()
         return cls(occupied.view(g, g, g).to(device), radius)
 
+    def points_in_voxels(self, voxels: torch.Tensor, count: int, generator: torch.Generator) -> torch.Tensor:
+        """`count` points spread uniformly over `voxels` ([ix, iy, iz] rows, e.g. occupied.nonzero()),
+        on the grid's device; the draws come from the CPU `generator`, so they are the same on any device."""
+        chosen = voxels[torch.randint(0, voxels.shape[0], (count,), generator=generator).to(voxels.device)].to(torch.float32)
+        voxel = 2.0 * self.radius / self.resolution
+        return -self.radius + (chosen + torch.rand(count, 3, generator=generator).to(chosen.device)) * voxel
+
     def lookup(self, points: torch.Tensor) -> torch.Tensor:
         """(..., 3) -> (...) bool: the point lies in an occupied voxel (points outside the cube: False)."""
         g = self.resolution

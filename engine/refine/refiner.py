@@ -83,11 +83,7 @@ def _volume_points(grid: OccupancyGrid | None, config: RefineConfig, generator: 
     count = config.eikonal_points
     if grid is None:
         return (torch.rand(count, 3, generator=generator) * 2.0 - 1.0).to(device)
-    occupied = grid.occupied.nonzero()
-    voxels = occupied[torch.randint(0, occupied.shape[0], (count,), generator=generator)].to(torch.float32)
-    voxel = 2.0 * grid.radius / grid.resolution
-    points = -grid.radius + (voxels + torch.rand(count, 3, generator=generator)) * voxel  # [ix, iy, iz] -> x, y, z
-    return points.to(device)
+    return grid.points_in_voxels(grid.occupied.nonzero(), count, generator).to(device)
 
 
 def _stage(fraction: float, stages: int) -> int:

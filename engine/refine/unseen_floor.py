@@ -36,9 +36,8 @@ class UnseenFloor:
     def __init__(self, grid: OccupancyGrid | None, radius: float):
         self.radius = radius
         self.height: float | None = None  # the running floor height (world z); None until rays have seen a surface
-        self._voxels = None if grid is None else grid.occupied.nonzero().to(torch.float32)
-        self._voxel = None if grid is None else 2.0 * grid.radius / grid.resolution
-        self._grid_radius = None if grid is None else grid.radius
+        self._grid = grid
+        self._voxels = None if grid is None else grid.occupied.nonzero()
 
     @torch.no_grad()
     def observe(self, origins: torch.Tensor, directions: torch.Tensor, depth: torch.Tensor, opacity: torch.Tensor,
@@ -58,12 +57,12 @@ class UnseenFloor:
         """Up to `count` points spread over the hull's voxels below the floor (None: none there, or no floor yet)."""
         if self.height is None or self._voxels is None:
             return None
-        top = (self._voxels[:, 2] + 1.0) * self._voxel - self._grid_radius  # each voxel's upper face
+        grid = self._grid
+        top = (self._voxels[:, 2] + 1) * (2.0 * grid.radius / grid.resolution) - grid.radius  # each voxel's upper face
         below = self._voxels[top <= self.height]
         if below.shape[0] == 0:
             return None
-        chosen = below[torch.randint(0, below.shape[0], (count,), generator=generator)]
-        return (-self._grid_radius + (chosen + torch.rand(count, 3, generator=generator)) * self._voxel).to(device)
+        return grid.points_in_voxels(below, count, generator).to(device)
 
     def loss(self, field, points: torch.Tensor) -> torch.Tensor:
         """Mean shortfall of the SDF below its lower bound, the height under the floor."""
