@@ -32,6 +32,10 @@ class LossWeights:
     # backgrounds saw and smooth where they saw nothing.
     pbr: float = 0.5
     albedo_delit: float = 0.0  # the albedo against the photo de-lit in closed form (objective.delit_albedo); off: not worth it yet (README)
+    # Nearby rays of one view whose photo colours have the same chromaticity should have the same
+    # albedo (objective.paired_albedo_smoothness): their difference in brightness is shading, which the
+    # lighting must then explain instead of the albedo (README: what it was worth).
+    albedo_pairs: float = 0.0
     light_seen: float = 0.2
     light_smooth: float = 0.02
 
@@ -68,8 +72,15 @@ class RefineConfig:
     # renderer's split-sum shading, from `pbr_start` of the budget on (the shape settles first).
     inverse_rendering: bool = False
     pbr_start: float = 0.25
+    # The normal the PBR term shades with: "head", the field's predicted normal, or "sdf", the SDF's
+    # gradient at each ray's surface point: the normal the export's normal map stores (README: what each was worth).
+    shading_normal: str = "sdf"
     # The floor term (losses.floor) from this share of the budget on; its height is followed from the start.
     floor_start: float = 0.2
+    # The albedo smoothness term's pairs: this share of each batch's uniform rays comes as neighbours of
+    # the others, within `pair_radius_px` pixels in the same view (no extra rays are rendered).
+    pair_fraction: float = 0.25
+    pair_radius_px: int = 3
     lighting_lr: float = 3e-2
     lighting_height: int = 16  # the fitted panorama's rows (x 2 columns)
     # The material prior holds roughness and metallic to the starting field's where that is a
@@ -86,6 +97,8 @@ class RefineConfig:
             raise ValueError(f"rays per step must be at least 16, got {self.rays_per_step}")
         if not self.plane_resolutions or min(self.plane_resolutions) < 8 or max(self.plane_resolutions) > 1024:
             raise ValueError(f"plane resolutions must lie in 8..1024, got {self.plane_resolutions}")
+        if self.shading_normal not in ("head", "sdf"):
+            raise ValueError(f"the shading normal is 'head' or 'sdf', got {self.shading_normal!r}")
 
     def to_dict(self) -> dict:
         return asdict(self)

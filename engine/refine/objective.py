@@ -38,17 +38,21 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
                directions: torch.Tensor | None = None,
                material_anchor: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]] | None = None,
                volume_points: torch.Tensor | None = None, floor=None,
-               floor_points: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, float]]:
+               floor_points: torch.Tensor | None = None,
+               pairs: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, float]]:
     """With `lighting` (a PanoramaLighting) and the rays' `directions`, the inverse-rendering terms too.
     `material_anchor` (points -> roughness, metallic): what the material prior holds the field to at
     the surface points, e.g. the LIRM prediction the fit started from; without it the prior is the
     constant roughness 0.5 and metallic 0 over each ray. `volume_points`: (K, 3) points spread over
     where the object may be, for the volume term. `floor` (unseen_floor.UnseenFloor) and its
-    `floor_points` below it: the floor term."""
+    `floor_points` below it: the floor term. `pairs`: (P, 2) batch positions of nearby rays of one
+    view, for the albedo smoothness term (with the inverse rendering)."""
     terms: dict[str, torch.Tensor] = {}
     terms["colour"] = (render.colour - colours).abs().mean()
     if lighting is not None:
         terms.update(inverse_rendering_terms(render, colours, alphas, lighting, directions, delit=weights.albedo_delit > 0))
+        if weights.albedo_pairs and pairs is not None and pairs.shape[0]:
+            terms["albedo_pairs"] = paired_albedo_smoothness(render, colours, alphas, pairs)
         weights = replace(weights, albedo=0.0)  # the albedo is fitted through the shading, not to the colour
     if weights.mask:
         opacity = render.opacity.clamp(1e-4, 1.0 - 1e-4)
@@ -123,6 +127,34 @@ def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alpha
     if usable.any():
         terms["albedo_delit"] = (albedo[usable] - target[usable]).abs().mean()
     return terms
+
+
+PAIR_CHROMA_SIGMA = 0.03  # chromaticity difference (r, g, b over their sum) that still counts as the same colour
+PAIR_MIN_RADIANCE = 0.02  # darker pixels' chromaticity is mostly noise: they are left out
+
+
+def paired_albedo_smoothness(render: RayBatchRender, colours: torch.Tensor, alphas: torch.Tensor,
+                             pairs: torch.Tensor) -> torch.Tensor:
+    """Nearby rays whose photo colours have the same chromaticity, weighted by how alike it is, should
+    have the same albedo: shading scales the linear colour and leaves its chromaticity, a change of
+    paint changes both. Without it the albedo may absorb whatever shading the lighting gets wrong
+    (an unseen light's side, a lumpy normal) and the lighting is never made to explain it; with it
+    a painted band round the object carries the light's fall-off to the lighting."""
+    i, j = pairs[:, 0], pairs[:, 1]
+    opacity = render.opacity
+    solid = (alphas[i] > 0.99) & (alphas[j] > 0.99) & (opacity[i].detach() > 0.5) & (opacity[j].detach() > 0.5)
+    with torch.no_grad():
+        linear = display_to_radiance_torch(colours.clamp(0.0, 0.98))
+        total = linear.sum(-1, keepdim=True)
+        chroma = linear / total.clamp(min=1e-6)
+        alike = torch.exp(-((chroma[i] - chroma[j]) ** 2).sum(-1) / (2.0 * PAIR_CHROMA_SIGMA**2))
+        bright = (total[i, 0] > PAIR_MIN_RADIANCE) & (total[j, 0] > PAIR_MIN_RADIANCE)
+        weight = alike * (solid & bright).to(alike.dtype)
+    if not bool(weight.any()):
+        return opacity.new_zeros(())
+    albedo = render.albedo / opacity.clamp(min=1e-3)[:, None]
+    difference = (albedo[i] - albedo[j]).abs().sum(-1)
+    return (weight * difference).sum() / weight.sum().clamp(min=1.0)
 
 
 @torch.no_grad()

@@ -13,7 +13,7 @@ renderer (model/volume_renderer.py) composites it, with samples placed where the
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 
@@ -84,6 +84,24 @@ def render_ray_batch(field, origins: torch.Tensor, directions: torch.Tensor, gri
     depth = zeros1.index_add(0, ray_index, weights.detach() * t_all[occupied])
     return RayBatchRender(colour, opacity, composite(sample.albedo[0]), roughness, metallic, composite(sample.normal[0]),
                           depth, near_surface, int(points.shape[0]))
+
+
+def with_sdf_normals(field, render: RayBatchRender, origins: torch.Tensor, directions: torch.Tensor) -> RayBatchRender:
+    """The batch with its shading normal replaced by the SDF's own gradient (central differences at
+    the field's `normal_eps`, as the export's normal map stores it) at each ray's expected surface
+    point, where the ray is mostly opaque; elsewhere the head's normal stays. The gradient reaches
+    the SDF, so the shading can shape the surface too."""
+    from lirm.engine.model.volume_renderer import numerical_normals
+
+    opacity = render.opacity.detach()
+    hit = opacity > 0.5
+    if not bool(hit.any()):
+        return render
+    distance = render.depth[hit] / opacity[hit]
+    points = origins[hit] + distance[:, None] * directions[hit]
+    normal = render.normal.clone()
+    normal[hit] = numerical_normals(field, points) * render.opacity[hit, None]  # premultiplied, like the head's
+    return replace(render, normal=normal)
 
 
 def _occupied(origins, directions, t, hit, grid: OccupancyGrid | None) -> torch.Tensor:

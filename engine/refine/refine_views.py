@@ -88,3 +88,18 @@ class RefineViews:
             return uniform
         pick = torch.randint(0, len(self.edge_index), (edges,), generator=generator)
         return torch.cat([uniform, self.edge_index[pick]])
+
+    def neighbours(self, index: torch.Tensor, radius_px: int, generator: torch.Generator) -> torch.Tensor:
+        """For each flat pixel index, another pixel of the same view at most `radius_px` away in x and
+        y (never itself; kept inside the image): pairs of nearby rays for the albedo smoothness term."""
+        _, height, width = self.masks.shape
+        per_view = height * width
+        view, rest = index // per_view, index % per_view
+        y, x = rest // width, rest % width
+        span = 2 * radius_px + 1
+        offset = torch.randint(0, span * span - 1, index.shape, generator=generator)
+        offset = offset + (offset >= (span * span) // 2).long()  # skip the centre: (0, 0)
+        dy, dx = offset // span - radius_px, offset % span - radius_px
+        y2 = (y + dy).clamp(0, height - 1)
+        x2 = (x + dx).clamp(0, width - 1)
+        return view * per_view + y2 * width + x2

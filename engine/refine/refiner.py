@@ -21,7 +21,7 @@ from lirm.engine.model.occupancy_grid import OccupancyGrid
 
 from .config import RefineConfig
 from .objective import batch_loss
-from .ray_rendering import render_ray_batch
+from .ray_rendering import render_ray_batch, with_sdf_normals
 from .refinable_field import RefinableField
 from .refine_views import RefineViews
 from .unseen_floor import UnseenFloor
@@ -145,15 +145,26 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
             for group in optimiser.param_groups:
                 group["lr"] = group["base_lr"] * decay
 
-            index = views.sample_rays(config.rays_per_step, config.edge_ray_fraction, generator)
+            shading = lighting if lighting is not None and fraction >= config.pbr_start else None
+            pairs = None
+            if shading is not None and config.losses.albedo_pairs:
+                # A share of the batch comes as neighbours of the rest (same number of rays in all).
+                count = int(config.rays_per_step * config.pair_fraction)
+                index = views.sample_rays(config.rays_per_step - count, config.edge_ray_fraction, generator)
+                anchors = torch.arange(count) % (index.shape[0])
+                index = torch.cat([index, views.neighbours(index[anchors], config.pair_radius_px, generator)])
+                pairs = torch.stack([anchors, torch.arange(count) + (index.shape[0] - count)], dim=1).to(device)
+            else:
+                index = views.sample_rays(config.rays_per_step, config.edge_ray_fraction, generator)
             origins, directions = views.origins[index].to(device), views.directions[index].to(device)
             colours, alphas = views.colours[index].to(device), views.alphas[index].to(device)
             field_ = refinable.field()
-            shading = lighting if lighting is not None and fraction >= config.pbr_start else None
             # Roughness and metallic along the rays only where a loss reads them there.
             materials = shading is not None or (anchor is None and config.losses.material_prior > 0)
             render = render_ray_batch(field_, origins, directions, grid, 1.0 / inv_beta, config.coarse_samples,
                                       config.fine_samples, generator, materials=materials)
+            if shading is not None and config.shading_normal == "sdf":
+                render = with_sdf_normals(field_, render, origins, directions)
             if floor is not None:
                 floor.observe(origins, directions, render.depth, render.opacity.detach(), alphas,
                               views.pixel_angles[index].to(device), 1.0 / inv_beta)
@@ -161,7 +172,8 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
             loss, terms = batch_loss(field_, render, colours, alphas, config.losses, config.eikonal_points, generator,
                                      shading, directions, anchor,
                                      _volume_points(grid, config, generator, device) if config.losses.volume else None,
-                                     floor, floor.points_below(config.eikonal_points, generator, device) if carve else None)
+                                     floor, floor.points_below(config.eikonal_points, generator, device) if carve else None,
+                                     pairs)
             optimiser.zero_grad(set_to_none=True)
             loss.backward()
             optimiser.step()

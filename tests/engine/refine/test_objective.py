@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
 from lirm.engine.lighting.camera_response import display_to_radiance_torch, radiance_to_display_torch
@@ -74,3 +75,51 @@ def test_the_curvature_term_sees_bumps_and_not_a_smooth_sphere():
         _, terms = batch_loss(field, render, torch.ones(n, 3), torch.ones(n), weights, 256, torch.Generator().manual_seed(1))
         curvature[name] = terms["curvature"]
     assert curvature["smooth"] < 1e-3 and curvature["bumpy"] > 10 * max(curvature["smooth"], 1e-4), curvature
+
+
+def _pair_render(albedo: torch.Tensor):
+    from lirm.engine.refine.ray_rendering import RayBatchRender
+
+    n = albedo.shape[0]
+    return RayBatchRender(torch.ones(n, 3), torch.ones(n), albedo, torch.zeros(n), torch.zeros(n), torch.zeros(n, 3),
+                          torch.zeros(n), torch.zeros(0, 3), 0)
+
+
+def test_the_pair_term_evens_out_shading_but_not_a_change_of_paint():
+    """Two pixels of one paint, one in shade, pull their albedos together; a pixel of another colour beside
+    them does not; clipped and dark pixels take no part."""
+    from lirm.engine.refine.objective import paired_albedo_smoothness
+
+    paint, other = torch.tensor([0.6, 0.3, 0.2]), torch.tensor([0.2, 0.3, 0.6])
+    lit, shaded = paint, 0.4 * paint  # the same chromaticity in linear light
+    colours = radiance_to_display_torch(torch.stack([lit, shaded, other, 0.001 * paint]))
+    alphas = torch.ones(4)
+    pairs = torch.tensor([[0, 1]])
+    albedo = torch.stack([lit, shaded, other, paint]).clone().requires_grad_(True)
+    term = paired_albedo_smoothness(_pair_render(albedo), colours, alphas, pairs)
+    assert term > 0.2  # the fit's albedo still carries the shading: penalised
+    term.backward()
+    assert (albedo.grad[0] * (albedo[0] - albedo[1]).detach()).sum() > 0  # descent brings them together
+    for unlike in ([[0, 2]], [[0, 3]]):  # another paint; a pixel too dark to tell its colour
+        assert paired_albedo_smoothness(_pair_render(albedo.detach()), colours, alphas, torch.tensor(unlike)) < 1e-3
+    outside = torch.tensor([1.0, 0.0, 1.0, 1.0])  # one of the pair off the object's mask
+    assert paired_albedo_smoothness(_pair_render(albedo.detach()), colours, outside, pairs) == 0
+
+
+def test_neighbours_stay_in_their_view_and_within_the_radius():
+    from lirm.engine.cameras import Camera
+    from lirm.engine.refine.refine_views import RefineViews
+
+    size, count = 16, 3
+    cameras = [Camera.from_fov(size, size, 40.0, np.eye(4)) for _ in range(count)]
+    views = RefineViews.build([f"v{i}" for i in range(count)], cameras, np.zeros((count, size, size, 3), np.float32),
+                              np.ones((count, size, size), np.float32))
+    g = torch.Generator().manual_seed(0)
+    index = torch.randint(0, views.pixels, (2000,), generator=g)
+    near = views.neighbours(index, 3, g)
+    per_view = size * size
+    assert torch.equal(index // per_view, near // per_view)
+    y, x, y2, x2 = (index % per_view) // size, index % size, (near % per_view) // size, near % size
+    assert int((y - y2).abs().max()) <= 3 and int((x - x2).abs().max()) <= 3
+    interior = (y >= 3) & (y < size - 3) & (x >= 3) & (x < size - 3)
+    assert not bool((near == index)[interior].any())  # never the pixel itself where there is room

@@ -96,6 +96,51 @@ def test_a_predicted_material_is_kept_where_the_photos_say_nothing(sphere_views)
     assert roughness[False][0] > roughness[True][0] + 0.1 and roughness[False][1] < roughness[True][1] - 0.2, roughness
 
 
+def test_the_inverse_rendering_fits_with_the_albedo_pairs_in_every_batch(sphere_views):
+    """With the pair term on, a share of each batch comes as neighbours and the term is in the loss."""
+    from lirm.engine.lighting.panorama_lighting import PanoramaLighting
+    from lirm.renderer.procedural_environments import make_procedural_environment
+
+    hull = initial_fields.masks_hull(sphere_views, 32, 1.0)
+    grid = initial_fields.sampling_grid(hull, 1.0, 1)
+    lighting = PanoramaLighting.from_environment(make_procedural_environment("studio", width=64), height=8)
+    config = replace(SMALL, iterations=10, inverse_rendering=True, pbr_start=0.0,
+                     losses=replace(SMALL.losses, albedo_pairs=1.0))
+    result = refine_field(_tiny_field(), sphere_views, config, grid, lighting=lighting)
+    paired = [h["albedo_pairs"] for h in result.history if "albedo_pairs" in h]
+    assert paired and all(np.isfinite(v) and v > 0 for v in paired), result.history
+    assert result.lighting is lighting and torch.isfinite(lighting.log_radiance).all()
+
+
+def test_sdf_shading_normals_are_the_surface_normals_and_carry_gradients(sphere_views):
+    from lirm.engine.refine.ray_rendering import with_sdf_normals
+
+    class Sphere(SphereField):
+        def sample(self, points, view_dirs=None, materials=True):
+            return super().sample(points, view_dirs)
+
+    sphere = Sphere(sphere_radius=0.5)
+    index = torch.arange(0, sphere_views.pixels, 7)
+    origins, directions = sphere_views.origins[index], sphere_views.directions[index]
+    render = render_ray_batch(sphere, origins, directions, None, 0.01, 48, 16)
+    shaded = with_sdf_normals(sphere, render, origins, directions)
+    hit = render.opacity > 0.5
+    assert hit.sum() > 50
+    points = origins[hit] + (render.depth[hit] / render.opacity[hit])[:, None] * directions[hit]
+    cosine = torch.nn.functional.cosine_similarity(shaded.normal[hit], points, dim=-1)
+    assert cosine.min() > 0.99, cosine.min()
+    torch.testing.assert_close(shaded.normal[~hit], render.normal[~hit])
+    # On a trainable field the normals differentiate into the planes and the SDF head, not the normal head.
+    refinable = _tiny_field()
+    field = refinable.field()
+    render = render_ray_batch(field, origins, directions, None, 0.05, 24, 8)
+    render = replace(render, opacity=torch.ones_like(render.opacity), depth=torch.full_like(render.depth, 2.6))
+    with_sdf_normals(field, render, origins, directions).normal.sum().backward()
+    assert refinable.planes.grad is not None and float(refinable.planes.grad.abs().sum()) > 0
+    assert all(p.grad is None or float(p.grad.abs().sum()) == 0 for p in refinable.heads.normal.parameters())
+    assert any(p.grad is not None and float(p.grad.abs().sum()) > 0 for p in refinable.heads.sdf.parameters())
+
+
 def test_cancel_keeps_the_state_reached(sphere_views):
     calls = []
     cancel_after = 12
