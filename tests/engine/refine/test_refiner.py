@@ -212,6 +212,8 @@ def test_presets_and_bad_settings():
         RefineConfig(minutes=0)
     with pytest.raises(ValueError, match="plane resolutions"):
         RefineConfig(plane_resolutions=(4,))
+    with pytest.raises(ValueError, match="shading normal"):
+        RefineConfig(shading_normal="mesh")
 
 
 def test_bench_options_set_one_setting_each_and_refuse_unknown_ones():
