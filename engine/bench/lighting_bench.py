@@ -14,6 +14,7 @@ from lirm.engine.assets.environment_files import resolve_environment
 from lirm.engine.cameras import Camera
 from lirm.engine.capture.alignment import similarity_align
 from lirm.engine.capture.capture_folder import Capture
+from lirm.engine.errors import LirmUserError
 from lirm.engine.evaluation.lighting_accuracy import LightingAccuracy, compare_lighting
 
 
@@ -22,10 +23,11 @@ class LightingBenchResult:
     accuracy: LightingAccuracy
     environment: str
     seen_fraction: float | None
+    source: str = "the backgrounds' estimate (as photographed)"
 
     def report(self) -> str:
         a = self.accuracy
-        lines = [f"capture lighting against the shoot's true environment ({self.environment}):",
+        lines = [f"capture lighting ({self.source}) against the shoot's true environment ({self.environment}):",
                  f"  brightest 1%: {a.brightest_angle_deg:.1f} degrees from the truth (goal: within 20)",
                  f"  irradiance on an upward-facing plane: {a.up_irradiance_ratio:.2f} x the truth (goal: 0.75-1.25)"]
         if self.seen_fraction is not None:
@@ -33,7 +35,19 @@ class LightingBenchResult:
         return "\n".join(lines)
 
 
-def run_lighting_bench(demo_out: str | Path, environment: str | None = None) -> LightingBenchResult:
+def refined_lighting_file(capture: Capture) -> Path | None:
+    """The lighting.hdr the capture's latest refinement with materials fitted, if any."""
+    for entry in reversed(capture.updates):
+        if entry.get("kind") == "refine" and entry.get("state"):
+            candidate = capture.root / Path(entry["state"]).parent / "lighting.hdr"
+            if candidate.is_file():
+                return candidate
+    return None
+
+
+def run_lighting_bench(demo_out: str | Path, environment: str | None = None, refined: bool = False) -> LightingBenchResult:
+    """`refined`: the lighting the latest refinement fitted with the materials (the inverse rendering,
+    starting from the backgrounds' estimate) instead of the estimate itself."""
     demo_out = Path(demo_out)
     capture = Capture.open(demo_out / "capture")
     truth_file = json.loads((demo_out / "truth" / "transforms.json").read_text())
@@ -43,8 +57,16 @@ def run_lighting_bench(demo_out: str | Path, environment: str | None = None) -> 
              for fid, state in capture.frames.items()
              if fid in capture.cameras and state.record.original.stem in truth_cameras]
     _, rotation, _ = similarity_align(np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs]))
-    estimate = resolve_environment(demo_out / "capture")
+    source = "the backgrounds' estimate (as photographed)"
+    if refined:
+        fitted = refined_lighting_file(capture)
+        if fitted is None:
+            raise LirmUserError(f"{demo_out / 'capture'}: no refinement with materials there (no lighting.hdr beside a "
+                                "refined state); run `lirm refine CAPTURE --materials` or `lirm demo` first")
+        estimate, source = resolve_environment(fitted), f"fitted with the materials, {fitted.relative_to(demo_out)}"
+    else:
+        estimate = resolve_environment(demo_out / "capture")
     truth = resolve_environment(environment, width=int(truth_file.get("environment_width", 1024)))
     info_file = demo_out / "capture" / "lighting" / "lighting.json"
     seen = json.loads(info_file.read_text()).get("seen_fraction") if info_file.is_file() else None
-    return LightingBenchResult(compare_lighting(estimate, truth, rotation), environment, seen)
+    return LightingBenchResult(compare_lighting(estimate, truth, rotation), environment, seen, source)

@@ -71,7 +71,7 @@ class RefineConfig:
     # Inverse rendering: fit the materials (and the lighting, from the capture's estimate) through the
     # renderer's split-sum shading, from `pbr_start` of the budget on (the shape settles first).
     inverse_rendering: bool = False
-    pbr_start: float = 0.25
+    pbr_start: float = 0.1
     # The normal the PBR term shades with: "head", the field's predicted normal, or "sdf", the SDF's
     # gradient at each ray's surface point: the normal the export's normal map stores (README: what each was worth).
     shading_normal: str = "sdf"

@@ -214,6 +214,16 @@ def test_demo_photographs_and_captures_a_builtin_object(tmp_path):
     # materials 0.95-1.39).
     assert "with the materials under the photos' lighting" in proc.stderr
     assert min(_relit_brightness_ratios(relit)) > 0.7, _relit_brightness_ratios(relit)
+    # `lirm bench lighting` compares both lightings of the shoot with the truth: the backgrounds'
+    # estimate, and (--refined) the one the refinement fitted with the materials.
+    for extra, source in (([], "as photographed"), (["--refined"], "fitted with the materials")):
+        bench = subprocess.run([str(Path(sys.executable).parent / "lirm"), "bench", "lighting", str(tmp_path / "demo")] + extra,
+                               capture_output=True, text=True, timeout=300)
+        assert bench.returncode == 0, bench.stderr
+        assert source in bench.stdout, bench.stdout
+        angle = float(re.search(r"brightest 1%: ([\d.]+) degrees", bench.stdout).group(1))
+        ratio = float(re.search(r"upward-facing plane: ([\d.]+) x", bench.stdout).group(1))
+        assert 0.0 <= angle <= 180.0 and ratio > 0.0, bench.stdout
 
 
 def _relit_brightness_ratios(sheet: np.ndarray, tile: int = 192) -> list[float]:

@@ -95,7 +95,7 @@ def test_a_cancelled_refinement_leaves_the_history_as_it_was(capture):
 
 @pytest.mark.slow
 def test_refine_with_materials_fits_them_under_the_capture_lighting(capture, capsys):
-    """`lirm refine --materials` (issue 19): from a quarter of the budget on, the PBR term is in the
+    """`lirm refine --materials` (issue 19): from a tenth of the budget on, the PBR term is in the
     loss and falls, and the fitted lighting is saved beside the state; without a lighting estimate
     the refinement says so and fits as before."""
     import numpy as np
