@@ -27,10 +27,13 @@ from lirm.renderer.procedural_environments import PROCEDURAL_ENVIRONMENTS, make_
 
 from .assets.asset_source import resolve_asset
 from .io.atomic_files import atomic_write_bytes, atomic_write_json
+from .lighting.capture_lighting import write_hdr
 from .io.images import to_uint8, write_png
 from .orbit_render import OrbitRenderConfig, normalizing_transform, orbit_for
 from .synth.capture_scene import SyntheticCaptureConfig, render_synthetic_capture
 from .synth.procedural_objects import BUILTIN_OBJECTS
+
+TRUE_LIGHTING_FILE = "lighting.hdr"  # in truth/
 
 
 @dataclass
@@ -89,10 +92,13 @@ def run_demo(out_dir: str | Path, config: DemoConfig = DemoConfig(), progress: C
         ok, jpeg = cv2.imencode(".jpg", cv2.cvtColor(image, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 95])
         atomic_write_bytes(photos / f"shot_{frame_id}.jpg", jpeg.tobytes())
         write_png(truth / "masks" / f"shot_{frame_id}.png", shoot.masks[frame_id])
+    # What lit the object: the shoot's environment with the lit ground below (capture_scene.py).
+    write_hdr(truth / TRUE_LIGHTING_FILE, shoot.lit_by)
     atomic_write_json(truth / "transforms.json", {
         "camera_model": "OPENCV",
-        "environment": config.shoot_environment,  # what lit the shoot: `lirm bench lighting` compares with it
+        "environment": config.shoot_environment,
         "environment_width": config.environment_width,
+        "lighting_file": TRUE_LIGHTING_FILE,  # what lit the object: `lirm bench lighting` compares with it
         "frames": [{"file_path": f"../photos/shot_{k}.jpg", **cam.to_dict()} for k, cam in sorted(shoot.cameras.items())],
     })
 

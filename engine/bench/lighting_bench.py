@@ -51,6 +51,7 @@ def run_lighting_bench(demo_out: str | Path, environment: str | None = None, ref
     demo_out = Path(demo_out)
     capture = Capture.open(demo_out / "capture")
     truth_file = json.loads((demo_out / "truth" / "transforms.json").read_text())
+    environment_override = environment
     environment = environment or truth_file.get("environment", "sky")
     truth_cameras = {Path(f["file_path"]).stem: Camera.from_dict(f) for f in truth_file["frames"]}
     pairs = [(capture.cameras[fid].center, truth_cameras[state.record.original.stem].center)
@@ -66,7 +67,12 @@ def run_lighting_bench(demo_out: str | Path, environment: str | None = None, ref
         estimate, source = resolve_environment(fitted), f"fitted with the materials, {fitted.relative_to(demo_out)}"
     else:
         estimate = resolve_environment(demo_out / "capture")
-    truth = resolve_environment(environment, width=int(truth_file.get("environment_width", 1024)))
+    if environment_override is None and truth_file.get("lighting_file"):
+        # The object's own lighting: the environment with the set's lit ground below (the demo writes it).
+        truth = resolve_environment(demo_out / "truth" / truth_file["lighting_file"])
+        environment = f"{environment} over the ground, truth/{truth_file['lighting_file']}"
+    else:
+        truth = resolve_environment(environment, width=int(truth_file.get("environment_width", 1024)))
     info_file = demo_out / "capture" / "lighting" / "lighting.json"
     seen = json.loads(info_file.read_text()).get("seen_fraction") if info_file.is_file() else None
     return LightingBenchResult(compare_lighting(estimate, truth, rotation), environment, seen, source)

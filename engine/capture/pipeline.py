@@ -382,7 +382,8 @@ def _lighting(capture: Capture, config: CaptureConfig, cancel) -> None:
         if mask is not None:
             images[f], masks[f] = capture.read_image(f), mask
     try:
-        lighting = estimate_capture_lighting(images, masks, capture.cameras, config.lighting, cancel=cancel)
+        plane = capture.normalization.plane if capture.normalization is not None else None
+        lighting = estimate_capture_lighting(images, masks, capture.cameras, config.lighting, cancel=cancel, support_plane=plane)
     except InterruptedError as error:
         raise Cancelled(str(error)) from error
     except ValueError as error:

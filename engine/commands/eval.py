@@ -35,7 +35,8 @@ def add_parser(subparsers) -> None:
                         help="skip the relighting test (each row's .glb export rendered under an environment that lit none "
                              "of the inputs; about 10 s per object and row on 2 cores)")
     parser.add_argument("--pictures", type=Path, help="write the relighting test's pictures here: per row and object, the truth "
-                        "under the relighting environment above the relit export, on three output views")
+                        "under the relighting environment above the relit export, on three output views, and the same under a "
+                        "second environment that lit none of the inputs either (the synthetic set; the glTF set with 3 or more HDRIs)")
     parser.add_argument("-o", "--out", type=Path, help="also write the table (.md) and the numbers (.json beside it)")
     parser.set_defaults(run=run)
 

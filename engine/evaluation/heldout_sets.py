@@ -35,7 +35,7 @@ from lirm.renderer.pbr_renderer import PBRRenderer
 from lirm.renderer.procedural_environments import PROCEDURAL_ENVIRONMENTS
 
 from .chamfer import surface_samples
-from .relighting import RelightTruth, render_relight_truth
+from .relighting import PICTURE_VIEWS, RelightTruth, render_relight_truth
 
 HELDOUT_VARIANT_BASE = 2**31  # training's object variants are drawn from [0, 2^31 - 1)
 OBJECT_RADIUS = 0.8
@@ -51,6 +51,8 @@ class HeldoutObject:
     mesh: tuple[np.ndarray, np.ndarray] | None = None  # the true surface as (vertices, faces), when known
     lit_by: str = ""  # the environment (and rotation) the input and output views were rendered under
     relight: RelightTruth | None = None  # the output views under an environment that lit none of the inputs
+    # The first few output views under a third environment, for the relighting pictures only (not scored).
+    relight_also: RelightTruth | None = None
     # The light of the inputs themselves, (environment, rotation_deg, exposure_ev), where known: for the
     # bench's oracle runs (`lirm bench refine --lighting truth`), never for a method under test.
     input_light: tuple | None = None
@@ -58,7 +60,7 @@ class HeldoutObject:
 
 def _render_object(renderer: PBRRenderer, name: str, model: LoadedModel, environment, rotation_deg: float, turn_deg: float,
                    protocol: ProtocolViews, surface_points: int, seed: int, relight_environment=None,
-                   relight_rotation_deg: float = 0.0) -> HeldoutObject:
+                   relight_rotation_deg: float = 0.0, picture_environment=None, picture_rotation_deg: float = 0.0) -> HeldoutObject:
     meshes = model.meshes
     transform = normalizing_transform(model.bounds)
     c, s = np.cos(np.radians(turn_deg)), np.sin(np.radians(turn_deg))
@@ -82,8 +84,12 @@ def _render_object(renderer: PBRRenderer, name: str, model: LoadedModel, environ
     if relight_environment is not None:
         relight = render_relight_truth(renderer, meshes, transform, protocol.cameras, list(protocol.outputs), relight_environment,
                                        relight_rotation_deg, auto_exposure_ev(relight_environment))
+    relight_also = None
+    if picture_environment is not None:
+        relight_also = render_relight_truth(renderer, meshes, transform, protocol.cameras, list(protocol.outputs)[:PICTURE_VIEWS],
+                                            picture_environment, picture_rotation_deg, auto_exposure_ev(picture_environment))
     return HeldoutObject(name, protocol, views, surface, mesh=(vertices, faces),
-                         lit_by=f"{environment.name} (rotated {rotation_deg:.0f}°)", relight=relight,
+                         lit_by=f"{environment.name} (rotated {rotation_deg:.0f}°)", relight=relight, relight_also=relight_also,
                          input_light=(environment, rotation_deg, auto_exposure_ev(environment)))
 
 
@@ -103,8 +109,12 @@ def synthetic_heldout(renderer: PBRRenderer, count: int = 8, size: int = 128, se
         # Drawn after the set's original draws, so that adding the relighting changed no object.
         relight_rotation = float(np.random.default_rng([seed, 2025, i]).uniform(0, 360))
         relight_env = resolve_environment(environments[(i + 1) % len(environments)], width=512)
+        # The pictures' second environment: the third built-in one, lighting none of the inputs either.
+        picture_env = resolve_environment(environments[(i + 2) % len(environments)], width=512)
+        picture_rotation = float(np.random.default_rng([seed, 2026, i]).uniform(0, 360))
         objects.append(_render_object(renderer, f"{name}#{i}", model, env, rotation, turn,
-                                      protocol_views(config, i), surface_points, seed + i, relight_env, relight_rotation))
+                                      protocol_views(config, i), surface_points, seed + i, relight_env, relight_rotation,
+                                      picture_env, picture_rotation))
     return objects
 
 
@@ -117,12 +127,16 @@ def gltf_heldout(renderer: PBRRenderer, models: list[Path], environments: list[P
         env = resolve_environment(environments[i % len(environments)])
         model = resolve_asset(path)
         rotation = float(rng.uniform(0, 360))
-        relight_env, relight_rotation = None, 0.0
+        relight_env, relight_rotation, picture_env, picture_rotation = None, 0.0, None, 0.0
         if len(environments) > 1:  # relit by an HDRI that lit none of its inputs
             relight_env = resolve_environment(environments[(i + 1) % len(environments)])
             relight_rotation = float(np.random.default_rng([seed, 4203, i]).uniform(0, 360))
+        if len(environments) > 2:  # and shown under a third one in the pictures
+            picture_env = resolve_environment(environments[(i + 2) % len(environments)])
+            picture_rotation = float(np.random.default_rng([seed, 4204, i]).uniform(0, 360))
         objects.append(_render_object(renderer, Path(path).stem, model, env, rotation, 0.0,
-                                      protocol_views(config, i), surface_points, seed + i, relight_env, relight_rotation))
+                                      protocol_views(config, i), surface_points, seed + i, relight_env, relight_rotation,
+                                      picture_env, picture_rotation))
     return objects
 
 

@@ -76,7 +76,8 @@ class Relighter:
     """Scores fields by the relighting test; owns one GL context for the exports and the renders.
 
     With `pictures`, each scored export also leaves a picture there (relight_pictures.py): the truth
-    and the relit export side by side on the first output views, named after `row` (set by the
+    and the relit export side by side on the first output views, under the relighting environment
+    and, where the object has one (`relight_also`), a second one; named after `row` (set by the
     caller per contender) and the object; a row scored after several updates keeps the last."""
 
     def __init__(self, config: RelightConfig = RelightConfig(), pictures: Path | None = None):
@@ -120,13 +121,22 @@ class Relighter:
                     scores.setdefault(key, []).append(value)
                 if self.pictures is not None and len(shown) < PICTURE_VIEWS:
                     shown.append((truth.radiance[i], truth.mask[i], out.radiance))
+            panels = [(truth.name, truth.exposure_ev, shown)]
+            also = getattr(obj, "relight_also", None)
+            if shown and also is not None:  # the pictures' second environment (not scored)
+                lighting = self._lighting_for(obj, also)
+                views = [i for i in outputs if i in also.radiance][:PICTURE_VIEWS]
+                panels.append((also.name, also.exposure_ev, [
+                    (also.radiance[i], also.mask[i], self.renderer.render_view(
+                        scene, obj.views.cameras[i], lighting, RenderSettings(show_environment=False, supersample=2)).radiance)
+                    for i in views]))
         finally:
             scene.release()
         if shown:
             from .relight_pictures import write_relight_picture
 
-            write_relight_picture(self.pictures / f"{_slug(self.row)}__{_slug(obj.name)}.png", shown, truth.exposure_ev,
-                                  f"{self.row} / {obj.name}: relit by {truth.name}")
+            write_relight_picture(self.pictures / f"{_slug(self.row)}__{_slug(obj.name)}.png", panels,
+                                  f"{self.row} / {obj.name}")
 
     def _lighting_for(self, obj, truth: RelightTruth):
         key = (obj.name, truth.name, truth.rotation_deg)

@@ -1,11 +1,14 @@
 """The environment a capture was photographed in, estimated from its own photos' backgrounds.
 
 Every posed photo's pixels outside the object's mask are rays that saw the surroundings. Each is
-followed to a proxy sphere around the object (radius: `proxy_radius` x the cameras' median distance),
-and the direction from the object's centre to where it lands gets the pixel's radiance (the camera's
-tone curve inverted, camera_response.py). Near surroundings (the table under the object) are placed
-roughly where the object sees them, far ones exactly; averaging over all photos gives a panorama in
-the capture's world frame (+Z up, the renderer's environment frame with rotation 0).
+followed to a proxy of the surroundings: the support plane the object stands on (or hangs from), when
+the capture found one, and a sphere around the object beyond it (radius: `proxy_radius` x the
+cameras' median distance); the direction from the object's centre to where it lands gets the pixel's
+radiance (the camera's tone curve inverted, camera_response.py). So the table under the object is
+placed where the object sees it (on a sphere alone a near floor lands 20 degrees too high: the
+cameras see it from above, the object from beside), and far surroundings exactly; averaging over all
+photos gives a panorama in the capture's world frame (+Z up, the renderer's environment frame with
+rotation 0).
 
 What the photos did not see (usually the sky or ceiling above them, whence most light comes) is
 filled smoothly from what they did see (push-pull over a pyramid), and marked as unseen in
@@ -62,6 +65,7 @@ class CaptureLighting:
     clipped: np.ndarray  # (H, W) share of those that were clipped (a lower bound of the radiance there)
     photos_used: int
     config: CaptureLightingConfig
+    on_support_plane: bool = False  # the backgrounds were placed on the capture's support plane (and the sphere)
 
     @property
     def seen_fraction(self) -> float:
@@ -88,6 +92,7 @@ class CaptureLighting:
         atomic_write_json(folder / INFO_FILE, {
             "photos_used": self.photos_used, "seen_fraction": round(self.seen_fraction, 4),
             "clipped_fraction_of_seen": round(self.clipped_fraction, 4), "config": asdict(self.config),
+            "proxy": "support plane and sphere" if self.on_support_plane else "sphere",
             "note": "directions no photo saw are filled smoothly from those they did (not measured)",
         })
         return folder / PANORAMA_FILE
@@ -121,9 +126,11 @@ def lighting_picture(lighting: CaptureLighting, scale: int = 4) -> np.ndarray:
 
 
 def estimate_capture_lighting(images: dict, masks: dict, cameras: dict, config: CaptureLightingConfig = CaptureLightingConfig(),
-                              cancel=None) -> CaptureLighting:
+                              cancel=None, support_plane: tuple[np.ndarray, float] | None = None) -> CaptureLighting:
     """`images` frame -> RGB(A) uint8 working image, `masks` frame -> uint8 (255 = object), `cameras`
-    frame -> Camera in the normalised world (object at the origin)."""
+    frame -> Camera in the normalised world (object at the origin). `support_plane` (unit normal
+    toward the cameras, offset: n . x = offset, in the same world; normalize.Normalization.plane):
+    background rays that meet it land there instead of on the sphere."""
     frames = [f for f in sorted(cameras) if f in images and f in masks]
     if not frames:
         raise ValueError("no posed photo with a mask to estimate the lighting from")
@@ -145,7 +152,7 @@ def estimate_capture_lighting(images: dict, masks: dict, cameras: dict, config: 
         ys, xs = ys[::step], xs[::step]
         display = rgb[ys, xs].astype(np.float64) / 255.0
         origins, directions = cameras[f].rays_at(np.stack([xs + 0.5, ys + 0.5], -1))
-        landing = origins + directions * _distance_to_sphere(origins, directions, radius)[:, None]
+        landing = origins + directions * _distance_to_proxy(origins, directions, radius, support_plane)[:, None]
         u, v = direction_to_equirect_uv(landing)
         texel = np.minimum((v * h).astype(np.int64), h - 1) * w + np.minimum((u * w).astype(np.int64), w - 1)
         radiance = display_to_radiance(display, config.response)
@@ -160,7 +167,7 @@ def estimate_capture_lighting(images: dict, masks: dict, cameras: dict, config: 
     filled = push_pull_fill(mean.reshape(h, w, 3), observed > 0)
     environment = Environment(filled.astype(np.float32), name=ENVIRONMENT_NAME)
     share = (clipped / np.maximum(count, 1)).reshape(h, w)
-    return CaptureLighting(environment, observed, share, used, config)
+    return CaptureLighting(environment, observed, share, used, config, support_plane is not None)
 
 
 def _background_pixels(image: np.ndarray, mask: np.ndarray, config: CaptureLightingConfig) -> tuple[np.ndarray, np.ndarray]:
@@ -170,6 +177,21 @@ def _background_pixels(image: np.ndarray, mask: np.ndarray, config: CaptureLight
     if image.shape[2] == 4:  # transparent pixels saw nothing (a cut-out render or a pre-masked photo)
         background &= image[:, :, 3] == 255
     return rgb, background
+
+
+def _distance_to_proxy(origins: np.ndarray, directions: np.ndarray, radius: float,
+                       plane: tuple[np.ndarray, float] | None) -> np.ndarray:
+    """Distance along each ray to the support plane, where it meets it first from the cameras' side,
+    else to where it leaves the proxy sphere."""
+    distance = _distance_to_sphere(origins, directions, radius)
+    if plane is None:
+        return distance
+    normal, offset = np.asarray(plane[0], np.float64), float(plane[1])
+    height = origins @ normal - offset  # > 0: the camera is on the plane's front side
+    toward = directions @ normal  # < 0: the ray goes toward the plane
+    meets = (height > 0.0) & (toward < -1e-9)
+    to_plane = np.where(meets, height / np.maximum(-toward, 1e-12), np.inf)
+    return np.minimum(distance, to_plane)
 
 
 def _distance_to_sphere(origins: np.ndarray, directions: np.ndarray, radius: float) -> np.ndarray:
@@ -237,7 +259,8 @@ def load_capture_lighting(capture_root: str | Path) -> CaptureLighting | None:
         observed, clipped = data["observed"].astype(np.float64), data["clipped"].astype(np.float64)
     info = load_capture_lighting_info(capture_root) or {}
     config = CaptureLightingConfig(**info["config"]) if "config" in info else CaptureLightingConfig()
-    return CaptureLighting(environment, observed, clipped, int(info.get("photos_used", 0)), config)
+    return CaptureLighting(environment, observed, clipped, int(info.get("photos_used", 0)), config,
+                           info.get("proxy") == "support plane and sphere")
 
 
 def load_capture_lighting_info(capture_root: str | Path) -> dict | None:

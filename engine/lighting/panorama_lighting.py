@@ -36,7 +36,7 @@ def brdf_table(size: int = 32, samples: int = 4096) -> torch.Tensor:
 
 
 class PanoramaLighting(torch.nn.Module):
-    def __init__(self, log_radiance: torch.Tensor):
+    def __init__(self, log_radiance: torch.Tensor, sharpest_lobe_texels: float = 1.0):
         super().__init__()
         height, width = log_radiance.shape[:2]
         self.log_radiance = torch.nn.Parameter(log_radiance.clone().float())
@@ -45,20 +45,22 @@ class PanoramaLighting(torch.nn.Module):
         self.register_buffer("directions", torch.from_numpy(dirs.reshape(-1, 3)).float())
         self.register_buffer("solid_angle", torch.from_numpy(solid_angle.reshape(-1)).float())
         self.register_buffer("lut", brdf_table())
-        self.min_lobe_cos = math.cos(math.pi / height)  # a texel's angular size
+        # The narrowest specular lobe, in texels (a texel spans pi / height): below it a lower roughness
+        # changes nothing, so the fit cannot tell a glaze from a satin finish there.
+        self.min_lobe_cos = math.cos(sharpest_lobe_texels * math.pi / height)
 
     @classmethod
-    def from_environment(cls, environment: Environment, height: int = 16) -> "PanoramaLighting":
+    def from_environment(cls, environment: Environment, height: int = 16, sharpest_lobe_texels: float = 1.0) -> "PanoramaLighting":
         """Area-average `environment` down to height x 2 height texels."""
         mean = _area_mean(environment.radiance, environment, height)
-        return cls(torch.from_numpy(np.log(np.maximum(mean, 1e-4))))
+        return cls(torch.from_numpy(np.log(np.maximum(mean, 1e-4))), sharpest_lobe_texels)
 
     @classmethod
-    def from_capture_lighting(cls, lighting, height: int = 16) -> "PanoramaLighting":
+    def from_capture_lighting(cls, lighting, height: int = 16, sharpest_lobe_texels: float = 1.0) -> "PanoramaLighting":
         """From a capture's estimate (capture_lighting.CaptureLighting): starts as its filled panorama
         and keeps what the photos saw as an observation (`observation_loss`); clipped texels are
         lower bounds only."""
-        panorama = cls.from_environment(lighting.environment, height)
+        panorama = cls.from_environment(lighting.environment, height, sharpest_lobe_texels)
         env = lighting.environment
         seen = (lighting.observed > 0).astype(np.float64)
         clipped = seen * lighting.clipped

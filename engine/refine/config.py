@@ -83,6 +83,7 @@ class RefineConfig:
     pair_radius_px: int = 3
     lighting_lr: float = 3e-2
     lighting_height: int = 16  # the fitted panorama's rows (x 2 columns)
+    lighting_sharpest_lobe: float = 1.0  # the narrowest specular lobe of the fitted panorama, in texels
     # The material prior holds roughness and metallic to the starting field's where that is a
     # prediction (LIRM, an earlier refinement) rather than to 0.5 and 0 (README: what it was worth).
     anchor_materials: bool = True

@@ -214,13 +214,18 @@ def test_demo_photographs_and_captures_a_builtin_object(tmp_path):
     # materials 0.95-1.39).
     assert "with the materials under the photos' lighting" in proc.stderr
     assert min(_relit_brightness_ratios(relit)) > 0.7, _relit_brightness_ratios(relit)
-    # `lirm bench lighting` compares both lightings of the shoot with the truth: the backgrounds'
-    # estimate, and (--refined) the one the refinement fitted with the materials.
+    # The mug stands on the set's floor: the capture found it as the support plane, and the lighting
+    # estimate placed the floor's pixels on it (capture_lighting.py), where the mug sees it.
+    assert json.loads((tmp_path / "demo" / "capture" / "lighting" / "lighting.json").read_text())["proxy"] == "support plane and sphere"
+    # `lirm bench lighting` compares both lightings of the shoot with the truth (the sky with the lit
+    # floor below, truth/lighting.hdr): the backgrounds' estimate, and (--refined) the one the
+    # refinement fitted with the materials.
+    assert (tmp_path / "demo" / "truth" / "lighting.hdr").is_file()
     for extra, source in (([], "as photographed"), (["--refined"], "fitted with the materials")):
         bench = subprocess.run([str(Path(sys.executable).parent / "lirm"), "bench", "lighting", str(tmp_path / "demo")] + extra,
                                capture_output=True, text=True, timeout=300)
         assert bench.returncode == 0, bench.stderr
-        assert source in bench.stdout, bench.stdout
+        assert source in bench.stdout and "sky over the ground, truth/lighting.hdr" in bench.stdout, bench.stdout
         angle = float(re.search(r"brightest 1%: ([\d.]+) degrees", bench.stdout).group(1))
         ratio = float(re.search(r"upward-facing plane: ([\d.]+) x", bench.stdout).group(1))
         assert 0.0 <= angle <= 180.0 and ratio > 0.0, bench.stdout

@@ -228,7 +228,10 @@ def test_pipeline_on_a_gltf_photographed_on_a_floor_under_an_hdri(tmp_path, shar
     try:
         env = load_environment_file(shared_data / "envmaps" / "forest_slope_1k.hdr")
         model = str(shared_data / "pbr_models" / "WaterBottle_tex256.glb")
-        shoot = render_synthetic_capture(renderer, env, SyntheticCaptureConfig(object_name=model))
+        # Lit by the bare HDRI, as when this check was set: lit by the floor too (the demo's shoot),
+        # the bottle reflects the gravel and the automatic masks miss its dark cap (IoU mean 0.83;
+        # README, "Captures", masks).
+        shoot = render_synthetic_capture(renderer, env, SyntheticCaptureConfig(object_name=model, floor_lights_object=False))
     finally:
         renderer.release()
     photos = tmp_path / "photos"

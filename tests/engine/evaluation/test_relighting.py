@@ -55,7 +55,10 @@ def test_an_export_of_the_true_shape_relights_like_the_truth(renderer, tmp_path)
     material = PBRMaterial(base_color_factor=(*ORANGE, 1.0), roughness_factor=0.5, metallic_factor=0.0)
     truth = render_relight_truth(renderer, [uv_sphere(0.5, segments=96, material=material)], np.eye(4), cameras, [0, 1, 2],
                                  environment, 30.0, 0.0)
-    obj = SimpleNamespace(name="sphere", relight=truth, views=SimpleNamespace(cameras=cameras))
+    # The pictures also show a second environment (studio), not scored.
+    also = render_relight_truth(renderer, [uv_sphere(0.5, segments=96, material=material)], np.eye(4), cameras, [0, 1, 2],
+                                make_procedural_environment("studio", width=256), 0.0, 0.0)
+    obj = SimpleNamespace(name="sphere", relight=truth, relight_also=also, views=SimpleNamespace(cameras=cameras))
     pattern = _Plain(colour_a=ORANGE, colour_b=ORANGE, roughness_range=(0.5, 0.5))
     relighter = Relighter(RelightConfig(grid=64, faces=4000, texture=128), pictures=tmp_path / "pictures")
     try:
@@ -70,16 +73,19 @@ def test_an_export_of_the_true_shape_relights_like_the_truth(renderer, tmp_path)
     # a smaller, shifted sphere does not.
     assert np.mean(right["relight_psnr_l"]) > 30.0, right
     assert np.mean(wrong["relight_psnr_l"]) < np.mean(right["relight_psnr_l"]) - 10.0, wrong
-    # The pictures: per row, the truth above the export on the three views; the true shape's halves agree.
+    # The pictures: per row and environment, the truth above the export on the three views; the true
+    # shape's rows agree under both environments, and the two environments look different.
     import cv2
 
     assert sorted(p.name for p in (tmp_path / "pictures").iterdir()) == ["shifted_smaller__sphere.png", "true_shape__sphere.png"]
     for name, close in (("true_shape__sphere.png", True), ("shifted_smaller__sphere.png", False)):
         picture = cv2.imread(str(tmp_path / "pictures" / name)).astype(np.float64)
         body = picture[22:]
-        assert body.shape[1] == 3 * body.shape[0] // 2  # three square views side by side, two rows
-        top, bottom = body[: body.shape[0] // 2], body[body.shape[0] // 2:]
-        assert (np.abs(top - bottom).mean() < 4.0) == close, name
+        assert body.shape[1] == 3 * body.shape[0] // 4  # three square views side by side, four rows
+        rows = np.split(body, 4)
+        for truth_row, export_row in ((rows[0], rows[1]), (rows[2], rows[3])):
+            assert (np.abs(truth_row - export_row).mean() < 4.0) == close, name
+        assert np.abs(rows[0] - rows[2]).mean() > 4.0  # sky and studio
 
 
 @pytest.mark.slow

@@ -89,3 +89,44 @@ def test_photos_without_background_have_no_lighting(photographed):
     cut_out = {f: np.dstack([image, masks[f]]) for f, image in images.items()}  # transparent around the object
     with pytest.raises(ValueError, match="no photo shows any background"):
         estimate_capture_lighting(cut_out, masks, cameras)
+
+
+def test_a_floor_in_the_photos_lands_where_the_object_sees_it(renderer):
+    """A grey sphere on a pebbled floor: with the capture's support plane as the proxy, the floor's
+    pixels land in the directions the object sees it in; on the sphere alone they land too high."""
+    from lirm.engine.synth.capture_scene import environment_around_object, ground_plane
+
+    environment = make_procedural_environment("overcast", width=256)
+    floor = ground_plane(10.0, -0.5, seed=0, texture_size=512)
+    around = environment_around_object(renderer, environment, floor, face_size=256)  # what the sphere sees
+    lighting = renderer.prepare_lighting(around)
+    scene = renderer.upload([uv_sphere(0.5, material=PBRMaterial(base_color_factor=(0.5, 0.5, 0.5, 1.0))), floor])
+    sphere_only = renderer.upload([uv_sphere(0.5)])
+    cameras, images, masks = {}, {}, {}
+    try:
+        for i in range(8):
+            angle = 2 * np.pi * i / 8
+            camera = Camera.from_fov(160, 120, 60.0, look_at((3.0 * np.cos(angle), 3.0 * np.sin(angle), 1.5), (0, 0, 0)))
+            cameras[f"{i:04d}"] = camera
+            images[f"{i:04d}"] = np.round(renderer.render_view(scene, camera, lighting, RenderSettings()).beauty * 255).astype(np.uint8)
+            masks[f"{i:04d}"] = np.where(renderer.render_view(sphere_only, camera, lighting, RenderSettings()).mask > 0.5, 255, 0).astype(np.uint8)
+    finally:
+        scene.release()
+        sphere_only.release()
+        lighting.maps.release()
+    config = CaptureLightingConfig(width=64)
+    on_plane = estimate_capture_lighting(images, masks, cameras, config, support_plane=(np.array([0.0, 0.0, 1.0]), -0.5))
+    on_sphere = estimate_capture_lighting(images, masks, cameras, config)
+    assert on_plane.on_support_plane and not on_sphere.on_support_plane
+    directions = on_plane.environment.texel_directions()[0]
+    truth = around.lookup(directions)
+
+    def floor_error(estimate):
+        # Texels well below the horizon that the photos saw: the floor as the object sees it.
+        seen = (estimate.observed >= 4) & (estimate.clipped == 0) & (directions[..., 2] < -0.15)
+        return seen.sum(), np.abs(estimate.environment.radiance[seen] - truth[seen]).mean() / truth[seen].mean()
+
+    seen_on_plane, error_on_plane = floor_error(on_plane)
+    _, error_on_sphere = floor_error(on_sphere)
+    assert seen_on_plane > 50
+    assert error_on_plane < 0.25 and error_on_plane < 0.7 * error_on_sphere
