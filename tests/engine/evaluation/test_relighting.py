@@ -80,9 +80,11 @@ def test_an_export_of_the_true_shape_relights_like_the_truth(renderer, tmp_path)
     assert sorted(p.name for p in (tmp_path / "pictures").iterdir()) == ["shifted_smaller__sphere.png", "true_shape__sphere.png"]
     for name, close in (("true_shape__sphere.png", True), ("shifted_smaller__sphere.png", False)):
         picture = cv2.imread(str(tmp_path / "pictures" / name)).astype(np.float64)
-        body = picture[22:]
-        assert body.shape[1] == 3 * body.shape[0] // 4  # three square views side by side, four rows
-        rows = np.split(body, 4)
+        # The title, then per environment a label and two rows of three square views.
+        side = picture.shape[1] // 3
+        assert picture.shape[0] == 3 * 22 + 4 * side
+        first, second = picture[44:44 + 2 * side], picture[66 + 2 * side:]
+        rows = np.split(first, 2) + np.split(second, 2)
         for truth_row, export_row in ((rows[0], rows[1]), (rows[2], rows[3])):
             assert (np.abs(truth_row - export_row).mean() < 4.0) == close, name
         assert np.abs(rows[0] - rows[2]).mean() > 4.0  # sky and studio

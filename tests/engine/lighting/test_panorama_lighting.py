@@ -49,3 +49,13 @@ def test_what_the_photos_saw_holds_the_panorama_and_clipped_light_is_a_lower_bou
     with torch.no_grad():
         lighting.log_radiance[:4] = torch.randn(4, 16, 3)
     assert float(lighting.smoothness_loss().detach()) > 0.1  # unseen, but kept smooth by its own term
+
+
+def test_below_the_sharpest_lobe_roughness_changes_nothing_and_a_finer_floor_lets_it():
+    environment = make_procedural_environment("studio", width=128)
+    direction = torch.tensor([[0.3, -0.2, 0.93]])
+    for texels, differs in ((1.0, False), (0.25, True)):
+        panorama = PanoramaLighting.from_environment(environment, 16, sharpest_lobe_texels=texels)
+        with torch.no_grad():
+            glaze, satin = (panorama.prefiltered(direction, torch.tensor([r])) for r in (0.1, 0.2))
+        assert bool((glaze - satin).abs().max() > 1e-4 * satin.abs().max()) == differs, texels
