@@ -36,6 +36,10 @@ class LossWeights:
     # albedo (objective.paired_albedo_smoothness): their difference in brightness is shading, which the
     # lighting must then explain instead of the albedo (README: what it was worth).
     albedo_pairs: float = 0.0
+    # Each surface point's roughness and metallic held to those of the batch's points with a like
+    # albedo (shared_materials.py): what a few pixels' highlights say about a paint reaches all of it.
+    shared_materials: float = 0.0
+    share_metallic: bool = True  # the metallic shared too, not only the roughness
     light_seen: float = 0.2
     light_smooth: float = 0.02
 

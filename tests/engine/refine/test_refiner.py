@@ -112,6 +112,21 @@ def test_the_inverse_rendering_fits_with_the_albedo_pairs_in_every_batch(sphere_
     assert result.lighting is lighting and torch.isfinite(lighting.log_radiance).all()
 
 
+def test_the_inverse_rendering_shares_materials_between_like_albedos(sphere_views):
+    """With the shared-materials term on, it is in the loss of every step of the inverse rendering."""
+    from lirm.engine.lighting.panorama_lighting import PanoramaLighting
+    from lirm.renderer.procedural_environments import make_procedural_environment
+
+    hull = initial_fields.masks_hull(sphere_views, 32, 1.0)
+    grid = initial_fields.sampling_grid(hull, 1.0, 1)
+    lighting = PanoramaLighting.from_environment(make_procedural_environment("studio", width=64), height=8)
+    config = replace(SMALL, iterations=10, inverse_rendering=True, pbr_start=0.0,
+                     losses=replace(SMALL.losses, shared_materials=1.0, share_metallic=False))
+    result = refine_field(_tiny_field(), sphere_views, config, grid, lighting=lighting)
+    shared = [h["shared_materials"] for h in result.history if "shared_materials" in h]
+    assert shared and all(np.isfinite(v) and v >= 0 for v in shared), result.history
+
+
 def test_sdf_shading_normals_are_the_surface_normals_and_carry_gradients(sphere_views):
     from lirm.engine.refine.ray_rendering import with_sdf_normals
 
