@@ -38,8 +38,10 @@ class LossWeights:
     albedo_pairs: float = 0.0
     # Each surface point's roughness and metallic held to those of the batch's points with a like
     # albedo (shared_materials.py): what a few pixels' highlights say about a paint reaches all of it.
-    shared_materials: float = 0.0
-    share_metallic: bool = True  # the metallic shared too, not only the roughness
+    # The roughness only: sharing the metallic too cost metallic PSNR (thin gold lines, their albedo
+    # blurred into the paint around them at 128 px, were pulled to its metallic; README).
+    shared_materials: float = 0.5
+    share_metallic: bool = False
     light_seen: float = 0.2
     light_smooth: float = 0.02
 
