@@ -42,6 +42,7 @@ class LossWeights:
     # blurred into the paint around them at 128 px, were pulled to its metallic; README).
     shared_materials: float = 0.5
     share_metallic: bool = False
+    shared_albedo_sigma: float = 0.05  # how unlike two albedos may be and still count as one paint (shared_materials.ALBEDO_SIGMA)
     light_seen: float = 0.2
     light_smooth: float = 0.02
 

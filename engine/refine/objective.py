@@ -14,7 +14,7 @@ from lirm.engine.lighting.split_sum_shading import shade
 
 from .config import LossWeights
 from .ray_rendering import RayBatchRender
-from .shared_materials import shared_material_loss
+from .shared_materials import ALBEDO_SIGMA, shared_material_loss
 
 
 CURVATURE_STEP = 0.01  # of the bounding radius: about a pixel's footprint at the protocol's 128 px
@@ -53,7 +53,7 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
     if lighting is not None:
         terms.update(inverse_rendering_terms(render, colours, alphas, lighting, directions, delit=weights.albedo_delit > 0,
                                              shared_materials=weights.shared_materials > 0,
-                                             share_metallic=weights.share_metallic))
+                                             share_metallic=weights.share_metallic, sigma=weights.shared_albedo_sigma))
         if weights.albedo_pairs and pairs is not None and pairs.shape[0]:
             terms["albedo_pairs"] = paired_albedo_smoothness(render, colours, alphas, pairs)
         weights = replace(weights, albedo=0.0)  # the albedo is fitted through the shading, not to the colour
@@ -108,7 +108,8 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
 
 def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alphas: torch.Tensor, lighting,
                             directions: torch.Tensor, delit: bool = False,
-                            shared_materials: bool = False, share_metallic: bool = True) -> dict[str, torch.Tensor]:
+                            shared_materials: bool = False, share_metallic: bool = True,
+                            sigma: float = ALBEDO_SIGMA) -> dict[str, torch.Tensor]:
     """The PBR materials at the rays' surfaces shaded under `lighting` (the renderer's split-sum model),
     through the camera's tone curve, against the photo, where both say object; and the lighting's own
     terms (what the backgrounds saw, smoothness)."""
@@ -126,7 +127,7 @@ def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alpha
     shaded = shade(lighting, albedo, roughness, metallic, normal, view).radiance
     terms["pbr"] = (radiance_to_display_torch(shaded) - colours[solid]).abs().mean()
     if shared_materials:
-        terms["shared_materials"] = shared_material_loss(albedo, roughness, metallic if share_metallic else None)
+        terms["shared_materials"] = shared_material_loss(albedo, roughness, metallic if share_metallic else None, sigma)
     if not delit:  # its four extra shadings per ray are only worth paying for when the term counts
         return terms
     target, usable = delit_albedo(lighting, colours[solid], roughness.detach(), metallic.detach(), normal.detach(), view)

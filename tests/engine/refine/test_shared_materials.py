@@ -55,3 +55,14 @@ def test_without_metallic_only_the_roughness_is_shared():
     assert float(shared_material_loss(albedo, roughness, None)) < 1e-8
     metallic = torch.rand(400, generator=torch.Generator().manual_seed(0))
     assert float(shared_material_loss(albedo, roughness, metallic)) > 0.05
+
+
+def test_the_kernel_width_says_which_albedos_are_one_paint():
+    """Two creams a little apart (about 0.06 in the display-like space) are one paint to a wide
+    kernel and two to a narrow one."""
+    albedo = torch.cat([torch.full((50, 3), 0.50), torch.full((50, 3), 0.58)])
+    roughness = torch.cat([torch.full((50, 1), 0.2), torch.full((50, 1), 0.6)])
+    narrow = like_albedo_targets(albedo, roughness, sigma=0.01)[:, 0]
+    wide = like_albedo_targets(albedo, roughness, sigma=0.5)[:, 0]
+    assert torch.allclose(narrow[:50], torch.tensor(0.2), atol=1e-3) and torch.allclose(narrow[50:], torch.tensor(0.6), atol=1e-3)
+    assert float((wide - 0.4).abs().max()) < 0.01
