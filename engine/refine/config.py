@@ -43,6 +43,12 @@ class LossWeights:
     shared_materials: float = 0.5
     share_metallic: bool = False
     shared_albedo_sigma: float = 0.05  # how unlike two albedos may be and still count as one paint (shared_materials.ALBEDO_SIGMA)
+    # The part of the log albedo that a linear function of the normal explains (unshaded_albedo.py):
+    # shading the inputs were lit with, which the lighting should carry instead (README: its worth).
+    albedo_unshaded: float = 0.0
+    # The albedo's L1 difference over a short step on the surface (albedo_smoothness.py): grain the
+    # albedo took from a grainy normal goes back to the normal and the light (README: its worth).
+    albedo_smooth: float = 0.0
     light_seen: float = 0.2
     light_smooth: float = 0.02
 

@@ -15,6 +15,8 @@ from lirm.engine.lighting.split_sum_shading import shade
 from .config import LossWeights
 from .ray_rendering import RayBatchRender
 from .shared_materials import ALBEDO_SIGMA, shared_material_loss
+from .albedo_smoothness import albedo_difference
+from .unshaded_albedo import normal_explained_albedo
 
 
 CURVATURE_STEP = 0.01  # of the bounding radius: about a pixel's footprint at the protocol's 128 px
@@ -53,7 +55,8 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
     if lighting is not None:
         terms.update(inverse_rendering_terms(render, colours, alphas, lighting, directions, delit=weights.albedo_delit > 0,
                                              shared_materials=weights.shared_materials > 0,
-                                             share_metallic=weights.share_metallic, sigma=weights.shared_albedo_sigma))
+                                             share_metallic=weights.share_metallic, sigma=weights.shared_albedo_sigma,
+                                             unshaded_albedo=weights.albedo_unshaded > 0))
         if weights.albedo_pairs and pairs is not None and pairs.shape[0]:
             terms["albedo_pairs"] = paired_albedo_smoothness(render, colours, alphas, pairs)
         weights = replace(weights, albedo=0.0)  # the albedo is fitted through the shading, not to the colour
@@ -68,7 +71,7 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
     if weights.material_prior and material_anchor is None:
         o = render.opacity.detach()
         terms["material_prior"] = ((render.roughness - 0.5 * o) ** 2 + render.metallic**2).mean()
-    if (weights.eikonal or weights.normal or weights.curvature) and render.surface_points.shape[0]:
+    if (weights.eikonal or weights.normal or weights.curvature or weights.albedo_smooth) and render.surface_points.shape[0]:
         points = render.surface_points
         if points.shape[0] > eikonal_points:
             points = points[torch.randint(0, points.shape[0], (eikonal_points,), generator=generator)]
@@ -84,6 +87,9 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
             nearby = sdf_gradients(field, points + step, 0.5 * field.normal_eps)
             here = gradient[: points.shape[0]]
             terms["curvature"] = (1.0 - F.cosine_similarity(here, nearby, dim=-1)).mean()
+        if weights.albedo_smooth:
+            offsets = torch.randn(points.shape[0], 3, generator=generator).to(points) * CURVATURE_STEP * field.radius
+            terms["albedo_smooth"] = albedo_difference(field, points, offsets)
         if weights.normal or (weights.material_prior and material_anchor is not None):
             at_surface = field.sample(points[None])
         if weights.normal:
@@ -109,7 +115,7 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
 def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alphas: torch.Tensor, lighting,
                             directions: torch.Tensor, delit: bool = False,
                             shared_materials: bool = False, share_metallic: bool = True,
-                            sigma: float = ALBEDO_SIGMA) -> dict[str, torch.Tensor]:
+                            sigma: float = ALBEDO_SIGMA, unshaded_albedo: bool = False) -> dict[str, torch.Tensor]:
     """The PBR materials at the rays' surfaces shaded under `lighting` (the renderer's split-sum model),
     through the camera's tone curve, against the photo, where both say object; and the lighting's own
     terms (what the backgrounds saw, smoothness)."""
@@ -128,6 +134,8 @@ def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alpha
     terms["pbr"] = (radiance_to_display_torch(shaded) - colours[solid]).abs().mean()
     if shared_materials:
         terms["shared_materials"] = shared_material_loss(albedo, roughness, metallic if share_metallic else None, sigma)
+    if unshaded_albedo:
+        terms["albedo_unshaded"] = normal_explained_albedo(albedo, normal)
     if not delit:  # its four extra shadings per ray are only worth paying for when the term counts
         return terms
     target, usable = delit_albedo(lighting, colours[solid], roughness.detach(), metallic.detach(), normal.detach(), view)

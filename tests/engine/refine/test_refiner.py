@@ -127,6 +127,21 @@ def test_the_inverse_rendering_shares_materials_between_like_albedos(sphere_view
     assert shared and all(np.isfinite(v) and v >= 0 for v in shared), result.history
 
 
+def test_the_inverse_rendering_keeps_the_albedo_from_following_the_normal(sphere_views):
+    """With the unshaded-albedo term on, it is in the loss of every step of the inverse rendering."""
+    from lirm.engine.lighting.panorama_lighting import PanoramaLighting
+    from lirm.renderer.procedural_environments import make_procedural_environment
+
+    hull = initial_fields.masks_hull(sphere_views, 32, 1.0)
+    grid = initial_fields.sampling_grid(hull, 1.0, 1)
+    lighting = PanoramaLighting.from_environment(make_procedural_environment("studio", width=64), height=8)
+    config = replace(SMALL, iterations=10, inverse_rendering=True, pbr_start=0.0,
+                     losses=replace(SMALL.losses, albedo_unshaded=1.0))
+    result = refine_field(_tiny_field(), sphere_views, config, grid, lighting=lighting)
+    unshaded = [h["albedo_unshaded"] for h in result.history if "albedo_unshaded" in h]
+    assert unshaded and all(np.isfinite(v) and v >= 0 for v in unshaded), result.history
+
+
 def test_sdf_shading_normals_are_the_surface_normals_and_carry_gradients(sphere_views):
     from lirm.engine.refine.ray_rendering import with_sdf_normals
 
