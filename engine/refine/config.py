@@ -44,10 +44,11 @@ class LossWeights:
     share_metallic: bool = False
     shared_albedo_sigma: float = 0.05  # how unlike two albedos may be and still count as one paint (shared_materials.ALBEDO_SIGMA)
     # The part of the log albedo that a linear function of the normal explains (unshaded_albedo.py):
-    # shading the inputs were lit with, which the lighting should carry instead (README: its worth).
+    # shading the inputs were lit with, which the lighting should carry instead. Off: the fit made
+    # everything metal instead (README).
     albedo_unshaded: float = 0.0
     # The albedo's L1 difference over a short step on the surface (albedo_smoothness.py): grain the
-    # albedo took from a grainy normal goes back to the normal and the light (README: its worth).
+    # albedo took from a grainy normal goes back to the normal and the light. Off: measured worse (README).
     albedo_smooth: float = 0.0
     light_seen: float = 0.2
     light_smooth: float = 0.02

@@ -142,6 +142,15 @@ def test_the_inverse_rendering_keeps_the_albedo_from_following_the_normal(sphere
     assert unshaded and all(np.isfinite(v) and v >= 0 for v in unshaded), result.history
 
 
+def test_the_albedo_smoothness_term_is_in_the_loss(sphere_views):
+    hull = initial_fields.masks_hull(sphere_views, 32, 1.0)
+    grid = initial_fields.sampling_grid(hull, 1.0, 1)
+    config = replace(SMALL, iterations=10, losses=replace(SMALL.losses, albedo_smooth=1.0))
+    result = refine_field(_tiny_field(), sphere_views, config, grid)
+    smooth = [h["albedo_smooth"] for h in result.history if "albedo_smooth" in h]
+    assert smooth and all(np.isfinite(v) and v >= 0 for v in smooth), result.history
+
+
 def test_sdf_shading_normals_are_the_surface_normals_and_carry_gradients(sphere_views):
     from lirm.engine.refine.ray_rendering import with_sdf_normals
 
