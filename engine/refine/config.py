@@ -87,7 +87,8 @@ class RefineConfig:
     inverse_rendering: bool = False
     pbr_start: float = 0.1
     # The normal the PBR term shades with: "head", the field's predicted normal, or "sdf", the SDF's
-    # gradient at each ray's surface point: the normal the export's normal map stores (README: what each was worth).
+    # gradient at each ray's surface point: the normal the export's normal map stores (README: what each was worth);
+    # "sdf-fixed", the same normal without letting the shading move the surface.
     shading_normal: str = "sdf"
     # The floor term (losses.floor) from this share of the budget on; its height is followed from the start.
     floor_start: float = 0.2
@@ -112,8 +113,8 @@ class RefineConfig:
             raise ValueError(f"rays per step must be at least 16, got {self.rays_per_step}")
         if not self.plane_resolutions or min(self.plane_resolutions) < 8 or max(self.plane_resolutions) > 1024:
             raise ValueError(f"plane resolutions must lie in 8..1024, got {self.plane_resolutions}")
-        if self.shading_normal not in ("head", "sdf"):
-            raise ValueError(f"the shading normal is 'head' or 'sdf', got {self.shading_normal!r}")
+        if self.shading_normal not in ("head", "sdf", "sdf-fixed"):
+            raise ValueError(f"the shading normal is 'head', 'sdf' or 'sdf-fixed', got {self.shading_normal!r}")
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -86,11 +86,13 @@ def render_ray_batch(field, origins: torch.Tensor, directions: torch.Tensor, gri
                           depth, near_surface, int(points.shape[0]))
 
 
-def with_sdf_normals(field, render: RayBatchRender, origins: torch.Tensor, directions: torch.Tensor) -> RayBatchRender:
+def with_sdf_normals(field, render: RayBatchRender, origins: torch.Tensor, directions: torch.Tensor,
+                     shape_surface: bool = True) -> RayBatchRender:
     """The batch with its shading normal replaced by the SDF's own gradient (central differences at
     the field's `normal_eps`, as the export's normal map stores it) at each ray's expected surface
     point, where the ray is mostly opaque; elsewhere the head's normal stays. The gradient reaches
-    the SDF, so the shading can shape the surface too."""
+    the SDF, so the shading can shape the surface too; with `shape_surface` False it does not (the
+    normal is read as it is, and only the materials and the lighting answer to the shading)."""
     from lirm.engine.model.volume_renderer import numerical_normals
 
     opacity = render.opacity.detach()
@@ -100,7 +102,9 @@ def with_sdf_normals(field, render: RayBatchRender, origins: torch.Tensor, direc
     distance = render.depth[hit] / opacity[hit]
     points = origins[hit] + distance[:, None] * directions[hit]
     normal = render.normal.clone()
-    normal[hit] = numerical_normals(field, points) * render.opacity[hit, None]  # premultiplied, like the head's
+    with torch.set_grad_enabled(shape_surface and torch.is_grad_enabled()):
+        surface_normal = numerical_normals(field, points)
+    normal[hit] = surface_normal * render.opacity[hit, None]  # premultiplied, like the head's
     return replace(render, normal=normal)
 
 

@@ -163,8 +163,8 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
             materials = shading is not None or (anchor is None and config.losses.material_prior > 0)
             render = render_ray_batch(field_, origins, directions, grid, 1.0 / inv_beta, config.coarse_samples,
                                       config.fine_samples, generator, materials=materials)
-            if shading is not None and config.shading_normal == "sdf":
-                render = with_sdf_normals(field_, render, origins, directions)
+            if shading is not None and config.shading_normal in ("sdf", "sdf-fixed"):
+                render = with_sdf_normals(field_, render, origins, directions, shape_surface=config.shading_normal == "sdf")
             if floor is not None:
                 floor.observe(origins, directions, render.depth, render.opacity.detach(), alphas,
                               views.pixel_angles[index].to(device), 1.0 / inv_beta)

@@ -178,6 +178,12 @@ def test_sdf_shading_normals_are_the_surface_normals_and_carry_gradients(sphere_
     assert refinable.planes.grad is not None and float(refinable.planes.grad.abs().sum()) > 0
     assert all(p.grad is None or float(p.grad.abs().sum()) == 0 for p in refinable.heads.normal.parameters())
     assert any(p.grad is not None and float(p.grad.abs().sum()) > 0 for p in refinable.heads.sdf.parameters())
+    # Held fixed ("sdf-fixed"): the same normals, and nothing reaches the field through them.
+    render = render_ray_batch(field, origins, directions, None, 0.05, 24, 8)
+    render = replace(render, opacity=torch.ones_like(render.opacity), depth=torch.full_like(render.depth, 2.6))
+    fixed = with_sdf_normals(field, render, origins, directions, shape_surface=False)
+    torch.testing.assert_close(fixed.normal.detach(), with_sdf_normals(field, render, origins, directions).normal.detach())
+    assert not fixed.normal.requires_grad  # every ray is a hit here, so nothing is left to differentiate
 
 
 def test_cancel_keeps_the_state_reached(sphere_views):
