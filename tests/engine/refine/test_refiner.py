@@ -183,7 +183,11 @@ def test_sdf_shading_normals_are_the_surface_normals_and_carry_gradients(sphere_
     render = replace(render, opacity=torch.ones_like(render.opacity), depth=torch.full_like(render.depth, 2.6))
     fixed = with_sdf_normals(field, render, origins, directions, shape_surface=False)
     torch.testing.assert_close(fixed.normal.detach(), with_sdf_normals(field, render, origins, directions).normal.detach())
-    assert not fixed.normal.requires_grad  # every ray is a hit here, so nothing is left to differentiate
+    for parameter in [refinable.planes, *refinable.heads.parameters()]:
+        parameter.grad = None
+    fixed.normal.sum().backward()
+    assert all(p.grad is None or float(p.grad.abs().sum()) == 0 for p in refinable.heads.sdf.parameters())
+    assert refinable.planes.grad is None or float(refinable.planes.grad.abs().sum()) == 0
 
 
 def test_cancel_keeps_the_state_reached(sphere_views):
