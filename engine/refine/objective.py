@@ -12,10 +12,10 @@ import torch.nn.functional as F
 from lirm.engine.lighting.camera_response import display_to_radiance_torch, radiance_to_display_torch
 from lirm.engine.lighting.split_sum_shading import shade
 
+from .albedo_smoothness import albedo_difference
 from .config import LossWeights
 from .ray_rendering import RayBatchRender
 from .shared_materials import ALBEDO_SIGMA, shared_material_loss
-from .albedo_smoothness import albedo_difference
 from .unshaded_albedo import normal_explained_albedo
 
 

@@ -96,58 +96,52 @@ def test_a_predicted_material_is_kept_where_the_photos_say_nothing(sphere_views)
     assert roughness[False][0] > roughness[True][0] + 0.1 and roughness[False][1] < roughness[True][1] - 0.2, roughness
 
 
-def test_the_inverse_rendering_fits_with_the_albedo_pairs_in_every_batch(sphere_views):
-    """With the pair term on, a share of each batch comes as neighbours and the term is in the loss."""
+def _refined_with_terms(sphere_views, inverse_rendering: bool = True, **weights):
+    """Ten steps from the tiny field on the sphere's views with the given loss weights; with
+    `inverse_rendering`, the materials fitted from the first step under an 8 x 16 studio panorama.
+    Returns (the result, the lighting or None)."""
     from lirm.engine.lighting.panorama_lighting import PanoramaLighting
     from lirm.renderer.procedural_environments import make_procedural_environment
 
     hull = initial_fields.masks_hull(sphere_views, 32, 1.0)
     grid = initial_fields.sampling_grid(hull, 1.0, 1)
-    lighting = PanoramaLighting.from_environment(make_procedural_environment("studio", width=64), height=8)
-    config = replace(SMALL, iterations=10, inverse_rendering=True, pbr_start=0.0,
-                     losses=replace(SMALL.losses, albedo_pairs=1.0))
-    result = refine_field(_tiny_field(), sphere_views, config, grid, lighting=lighting)
-    paired = [h["albedo_pairs"] for h in result.history if "albedo_pairs" in h]
+    lighting = None
+    config = replace(SMALL, iterations=10, losses=replace(SMALL.losses, **weights))
+    if inverse_rendering:
+        lighting = PanoramaLighting.from_environment(make_procedural_environment("studio", width=64), height=8)
+        config = replace(config, inverse_rendering=True, pbr_start=0.0)
+    return refine_field(_tiny_field(), sphere_views, config, grid, lighting=lighting), lighting
+
+
+def _term_values(result, name: str) -> list[float]:
+    return [h[name] for h in result.history if name in h]
+
+
+def test_the_inverse_rendering_fits_with_the_albedo_pairs_in_every_batch(sphere_views):
+    """With the pair term on, a share of each batch comes as neighbours and the term is in the loss."""
+    result, lighting = _refined_with_terms(sphere_views, albedo_pairs=1.0)
+    paired = _term_values(result, "albedo_pairs")
     assert paired and all(np.isfinite(v) and v > 0 for v in paired), result.history
     assert result.lighting is lighting and torch.isfinite(lighting.log_radiance).all()
 
 
 def test_the_inverse_rendering_shares_materials_between_like_albedos(sphere_views):
     """With the shared-materials term on, it is in the loss of every step of the inverse rendering."""
-    from lirm.engine.lighting.panorama_lighting import PanoramaLighting
-    from lirm.renderer.procedural_environments import make_procedural_environment
-
-    hull = initial_fields.masks_hull(sphere_views, 32, 1.0)
-    grid = initial_fields.sampling_grid(hull, 1.0, 1)
-    lighting = PanoramaLighting.from_environment(make_procedural_environment("studio", width=64), height=8)
-    config = replace(SMALL, iterations=10, inverse_rendering=True, pbr_start=0.0,
-                     losses=replace(SMALL.losses, shared_materials=1.0, share_metallic=False))
-    result = refine_field(_tiny_field(), sphere_views, config, grid, lighting=lighting)
-    shared = [h["shared_materials"] for h in result.history if "shared_materials" in h]
+    result, _ = _refined_with_terms(sphere_views, shared_materials=1.0, share_metallic=False)
+    shared = _term_values(result, "shared_materials")
     assert shared and all(np.isfinite(v) and v >= 0 for v in shared), result.history
 
 
 def test_the_inverse_rendering_keeps_the_albedo_from_following_the_normal(sphere_views):
     """With the unshaded-albedo term on, it is in the loss of every step of the inverse rendering."""
-    from lirm.engine.lighting.panorama_lighting import PanoramaLighting
-    from lirm.renderer.procedural_environments import make_procedural_environment
-
-    hull = initial_fields.masks_hull(sphere_views, 32, 1.0)
-    grid = initial_fields.sampling_grid(hull, 1.0, 1)
-    lighting = PanoramaLighting.from_environment(make_procedural_environment("studio", width=64), height=8)
-    config = replace(SMALL, iterations=10, inverse_rendering=True, pbr_start=0.0,
-                     losses=replace(SMALL.losses, albedo_unshaded=1.0))
-    result = refine_field(_tiny_field(), sphere_views, config, grid, lighting=lighting)
-    unshaded = [h["albedo_unshaded"] for h in result.history if "albedo_unshaded" in h]
+    result, _ = _refined_with_terms(sphere_views, albedo_unshaded=1.0)
+    unshaded = _term_values(result, "albedo_unshaded")
     assert unshaded and all(np.isfinite(v) and v >= 0 for v in unshaded), result.history
 
 
 def test_the_albedo_smoothness_term_is_in_the_loss(sphere_views):
-    hull = initial_fields.masks_hull(sphere_views, 32, 1.0)
-    grid = initial_fields.sampling_grid(hull, 1.0, 1)
-    config = replace(SMALL, iterations=10, losses=replace(SMALL.losses, albedo_smooth=1.0))
-    result = refine_field(_tiny_field(), sphere_views, config, grid)
-    smooth = [h["albedo_smooth"] for h in result.history if "albedo_smooth" in h]
+    result, _ = _refined_with_terms(sphere_views, inverse_rendering=False, albedo_smooth=1.0)
+    smooth = _term_values(result, "albedo_smooth")
     assert smooth and all(np.isfinite(v) and v >= 0 for v in smooth), result.history
 
 
