@@ -56,17 +56,19 @@ def apply_options(config: RefineConfig, options: list[str]) -> RefineConfig:
 
 
 def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfig, base: RefineConfig, minutes: list[float],
-                     init: str, progress=None, pictures: Path | None = None, true_lighting: bool = False) -> dict:
+                     init: str, progress=None, pictures: Path | None = None, true_lighting: bool = False,
+                     fit_textures: bool = True) -> dict:
     """With base.inverse_rendering, also the material and relighting scores (and, with `pictures`,
     the relighting test's pictures there); `true_lighting`: the oracle lit by the inputs' true
-    environment instead of the estimate from their backgrounds."""
+    environment instead of the estimate from their backgrounds; `fit_textures`: the relighting test's
+    export fits its textures to the input photos (RelightConfig.fit_textures)."""
     meter = PeakMemory("cpu" if base.device == "cpu" else "cuda")
     budgets = []
     relighter = None
     if base.inverse_rendering:
-        from lirm.engine.evaluation.relighting import Relighter
+        from lirm.engine.evaluation.relighting import RelightConfig, Relighter
 
-        relighter = Relighter(pictures=pictures)
+        relighter = Relighter(RelightConfig(fit_textures=fit_textures), pictures=pictures)
     keys = ("psnr", "ssim", "albedo_psnr", "roughness_psnr", "metallic_psnr", "chamfer", "seconds", "steps") + (
         RELIGHT_KEYS if relighter else ())
     try:
@@ -85,7 +87,7 @@ def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfi
     finally:
         if relighter is not None:
             relighter.release()
-    return {"init": init, "lighting": "truth" if true_lighting else "estimate", "settings": base.to_dict(),
+    return {"init": init, "lighting": "truth" if true_lighting else "estimate", "texture_fit": fit_textures, "settings": base.to_dict(),
             "memory_method": meter.method, "budgets": budgets}
 
 

@@ -23,6 +23,9 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--obj", action="store_true", help="also write NAME.obj + NAME.mtl + PNG textures beside the .glb")
     parser.add_argument("--usdz", action="store_true", help="also write NAME.usdz beside the .glb (the same mesh and textures)")
     parser.add_argument("--update", type=int, help="export the state after this update (default: the latest)")
+    parser.add_argument("--no-texture-fit", action="store_true",
+                        help="keep the field's baked textures: do not fit them to the photos afterwards (done by default for a "
+                             "state refined with materials, `lirm refine --materials`)")
     parser.set_defaults(run=run)
 
 
@@ -46,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     check_export_memory(args)
     config = ExportConfig(mesh=replace(MeshExtractionConfig(), resolution=args.grid, face_budget=args.faces),
                           texture_size=args.texture, normal_map=not args.no_normal_map, obj=args.obj,
-                          usdz=args.usdz)
+                          usdz=args.usdz, **({"texture_fit": None} if args.no_texture_fit else {}))
     result, source = export_capture(args.capture, args.out, config, args.checkpoint,
                                     progress=_export_progress, update=args.update)
     if not source.trained:
@@ -56,6 +59,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"about these weights: {source.note}", file=sys.stderr)
     timings = ", ".join(f"{k} {v:.1f} s" for k, v in result.seconds.items())
     print(f"{result.path}: {result.faces} faces, {result.vertices} vertices, {result.texture_size}px textures ({timings})")
+    if result.texture_fit is not None:
+        print(result.texture_fit.summary())
+    elif _exports_a_refinement(args.capture, args.update) and not args.no_texture_fit:
+        print("textures: the field's own (baked); they are fitted to the photos only for a state refined with materials "
+              "(`lirm refine --materials`)")
     from ..capture.capture_folder import Capture
 
     real = Capture.open(args.capture).settings.get("real_size")

@@ -125,9 +125,10 @@ def model_inputs(model, obj: HeldoutObject, indices, device):
 
 @torch.no_grad()
 def score_field(field_, obj: HeldoutObject, outputs: list[int], config: EvalConfig, scores: dict[str, list[float]],
-                lpips_net=None, relighter=None) -> None:
+                lpips_net=None, relighter=None, photos=None, lighting=None) -> None:
     """Render the field from the output views and append each metric to `scores` (the Chamfer distance
-    once); with a `relighter` (relighting.Relighter), also the relighting test of its export."""
+    once); with a `relighter` (relighting.Relighter), also the relighting test of its export (its
+    textures fitted to `photos` under `lighting` when both are given: Relighter.score)."""
     device = device_of(field_)
     step = 2.0 * field_.radius / config.render.samples_per_ray
     grid = OccupancyGrid.build(field_, field_.radius, config.render.beta, step, config.occupancy)
@@ -150,7 +151,7 @@ def score_field(field_, obj: HeldoutObject, outputs: list[int], config: EvalConf
     if obj.surface is not None and len(obj.surface):
         scores.setdefault("chamfer", []).append(chamfer_distance(_field_mesh_points(field_, config), obj.surface))
     if relighter is not None:
-        relighter.score(field_, obj, outputs, scores, lpips_net)
+        relighter.score(field_, obj, outputs, scores, lpips_net, photos, lighting)
 
 
 def update_scores(update: int, s: dict[str, list[float]]) -> UpdateScores:

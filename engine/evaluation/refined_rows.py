@@ -13,6 +13,7 @@ Seconds count everything from the views to the refined field (the updates too), 
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -47,9 +48,18 @@ def lirm_field(model, obj: HeldoutObject, updates: int):
     return model.decode(state)
 
 
-def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig, init: str, true_lighting=None):
-    """(refined field, seconds, refinement steps) for one held-out object. `true_lighting` (a
-    PBRRenderer): inverse-render under the inputs' true environment instead of the estimate (an oracle)."""
+@dataclass
+class RefinedObject:
+    field: object  # the refined field, frozen
+    seconds: float
+    steps: int
+    views: RefineViews  # the input views it was fitted to
+    lighting: object | None  # the lighting fitted with the materials (None without them)
+
+
+def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig, init: str, true_lighting=None) -> RefinedObject:
+    """One held-out object refined. `true_lighting` (a PBRRenderer): inverse-render under the inputs'
+    true environment instead of the estimate (an oracle)."""
     sets = obj.protocol.input_sets[:updates]
     views = refine_inputs(obj, [i for s in sets for i in s])
     start = time.perf_counter()
@@ -69,7 +79,7 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
         lighting = (oracle_lighting(obj, true_lighting) if true_lighting is not None
                     else input_lighting(obj, [i for s in sets for i in s], refine))
     result = refine_field(refinable, views, refine, grid, lighting=lighting, start_has_materials=init == "lirm")
-    return result.field.frozen_field(), time.perf_counter() - start, result.steps
+    return RefinedObject(result.field.frozen_field(), time.perf_counter() - start, result.steps, views, result.lighting)
 
 
 def input_lighting(obj: HeldoutObject, indices: list[int], refine: RefineConfig):
@@ -108,11 +118,12 @@ def evaluate_refined(model, objects: list[HeldoutObject], config: EvalConfig, re
     for k, obj in enumerate(objects):
         if progress:
             progress(f"refining {obj.name}", k, len(objects))
-        field, seconds, _ = refine_object(model, obj, config.updates, refine, init)
+        refined = refine_object(model, obj, config.updates, refine, init)
         outputs = obj.protocol.outputs[:config.output_views] if config.output_views else obj.protocol.outputs
-        scores.setdefault("seconds", []).append(seconds)
+        scores.setdefault("seconds", []).append(refined.seconds)
         with torch.no_grad():
-            score_field(field, obj, outputs, config, scores, relighter=relighter)
+            score_field(refined.field, obj, outputs, config, scores, relighter=relighter, photos=refined.views,
+                        lighting=refined.lighting)
     if progress:
         progress("refined", len(objects), len(objects))
     updates = min(config.updates, min(len(o.protocol.input_sets) for o in objects)) if objects else config.updates
@@ -132,15 +143,16 @@ def per_object_scores(model, objects: list[HeldoutObject], config: EvalConfig, r
     rows = []
     for obj in objects:
         oracle = relighter.renderer if true_lighting and relighter is not None else None
-        field, seconds, steps = refine_object(model, obj, config.updates, refine, init, oracle)
+        refined = refine_object(model, obj, config.updates, refine, init, oracle)
         outputs = obj.protocol.outputs[:config.output_views] if config.output_views else obj.protocol.outputs
         scores: dict[str, list[float]] = {}
         with torch.no_grad():
-            score_field(field, obj, outputs, config, scores, relighter=relighter)
+            score_field(refined.field, obj, outputs, config, scores, relighter=relighter, photos=refined.views,
+                        lighting=refined.lighting)
         row = update_scores(config.updates, scores).to_dict()
         keys = ("psnr", "ssim", "albedo_psnr", "roughness_psnr", "metallic_psnr", "chamfer") + (
             RELIGHT_KEYS if relighter is not None else ())
-        rows.append({"object": obj.name, "seconds": seconds, "steps": steps, **{k: row[k] for k in keys}})
+        rows.append({"object": obj.name, "seconds": refined.seconds, "steps": refined.steps, **{k: row[k] for k in keys}})
     return rows
 
 

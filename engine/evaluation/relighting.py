@@ -70,6 +70,9 @@ class RelightConfig:
     grid: int = 96  # marching-cubes samples per side for the exported mesh
     faces: int = 8_000
     texture: int = 256
+    # Where a row brings its input photos and fitted lighting (the refined rows with materials), the
+    # export fits its textures to them, as `lirm export` does for a capture refined with materials.
+    fit_textures: bool = True
 
 
 class Relighter:
@@ -91,20 +94,25 @@ class Relighter:
         self._lighting_key = None
         self._lighting = None
 
-    def score(self, field_, obj, outputs: list[int], scores: dict[str, list[float]], lpips_net=None) -> None:
+    def score(self, field_, obj, outputs: list[int], scores: dict[str, list[float]], lpips_net=None,
+              photos=None, lighting=None) -> None:
+        """`photos` (PhotoViews: the row's input views) and `lighting` (fitted with its materials): the
+        export's textures are fitted to them (config.fit_textures)."""
         truth = getattr(obj, "relight", None)
         if truth is None:
             return
         from lirm.engine.assets.model_loader import load_model
         from lirm.engine.export.export_asset import ExportConfig, export_field
+        from lirm.engine.export.photo_texture_fit import TextureFitConfig
         from lirm.engine.export.field_mesh import MeshExtractionConfig, NoSurfaceError
 
         config = ExportConfig(mesh=MeshExtractionConfig(resolution=self.config.grid, face_budget=self.config.faces),
-                              texture_size=self.config.texture)
+                              texture_size=self.config.texture,
+                              texture_fit=TextureFitConfig() if self.config.fit_textures else None)
         with tempfile.TemporaryDirectory(prefix="lirm-relight-") as tmp:
             path = Path(tmp) / "asset.glb"
             try:
-                export_field(field_, path, config, context=self.ctx)
+                export_field(field_, path, config, context=self.ctx, photos=photos, lighting=lighting)
             except NoSurfaceError:
                 for key in ("relight_psnr_h", "relight_psnr_l", "relight_ssim"):
                     scores.setdefault(key, []).append(float("nan"))

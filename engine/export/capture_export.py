@@ -4,6 +4,10 @@ it, exported as a .glb at the capture's real-world scale.
 The normalised capture frame is +Z up with the object inside the unit sphere; the export divides
 by the normalisation's scale (back to the photos' units: metres when the poses were metric) and,
 stands the object on glTF's ground: its lowest point at height 0, its base centred on the vertical axis.
+
+A state refined with materials (`lirm refine --materials`: a lighting.hdr beside it) also brings the
+photos it was fitted to and that lighting, and the export's textures are fitted to those photos
+(photo_texture_fit.py).
 """
 
 from __future__ import annotations
@@ -29,15 +33,44 @@ def reconstruction_model(capture: Capture, checkpoint: str | Path | None = None)
     return load_model(checkpoint, preset)
 
 
-def latest_state_path(capture: Capture, update: int | None = None) -> Path:
-    """The state after `update` (1-based; default the latest)."""
+def chosen_entry(capture: Capture, update: int | None = None) -> dict:
+    """The history entry of the update that is exported (1-based; default the latest)."""
     if not capture.updates:
         raise LirmUserError(f"{capture.root} has no reconstruction yet: run `lirm reconstruct {capture.root}` first")
     if update is None:
-        return capture.root / capture.updates[-1]["state"]
+        return capture.updates[-1]
     if not 1 <= update <= len(capture.updates):
         raise LirmUserError(f"{capture.root} has updates 1..{len(capture.updates)}, not {update}")
-    return capture.root / capture.updates[update - 1]["state"]
+    return capture.updates[update - 1]
+
+
+def texture_fit_inputs(capture: Capture, entry: dict):
+    """(PhotoViews, PanoramaLighting) for fitting the export's textures: the prepared views a
+    refinement with materials was fitted to and the lighting it fitted (lighting.hdr beside its
+    state); None for any other state (an update, or a refinement without materials)."""
+    if entry.get("kind") != "refine" or not entry.get("state"):
+        return None
+    lighting_file = capture.root / Path(entry["state"]).parent / "lighting.hdr"
+    if not lighting_file.is_file():
+        return None
+    from lirm.engine.assets.environment_files import load_environment_file
+    from lirm.engine.lighting.panorama_lighting import PanoramaLighting
+
+    from .photo_texture_fit import PhotoViews
+
+    views = [capture.read_prepared(fid) for fid in entry.get("frames", [])]
+    views = [v for v in views if v is not None]
+    if not views:
+        return None
+    environment = load_environment_file(lighting_file)
+    lighting = PanoramaLighting.from_environment(environment, environment.radiance.shape[0])
+    photos = PhotoViews([v.camera for v in views], np.stack([v.image_masked for v in views]), np.stack([v.mask for v in views]))
+    return photos, lighting
+
+
+def latest_state_path(capture: Capture, update: int | None = None) -> Path:
+    """The state after `update` (1-based; default the latest)."""
+    return capture.root / chosen_entry(capture, update)["state"]
 
 
 def export_transform(capture: Capture) -> np.ndarray:
@@ -88,11 +121,14 @@ def in_metres(transform: np.ndarray, vertices: np.ndarray, real_size: dict | Non
 
 def export_capture(capture_dir: str | Path, out_path: str | Path, config: ExportConfig = ExportConfig(),
                    checkpoint: str | Path | None = None, progress: Progress | None = None,
-                   source: ModelSource | None = None, update: int | None = None) -> tuple[ExportResult, ModelSource]:
+                   source: ModelSource | None = None, update: int | None = None,
+                   should_stop=None) -> tuple[ExportResult, ModelSource]:
     """`source`: the model already loaded by the caller (else reconstruction_model's choice); `update`:
-    the state after that update instead of the latest."""
+    the state after that update instead of the latest. A state refined with materials has its
+    textures fitted to its photos (config.texture_fit; `should_stop` ends that fit early)."""
     capture = Capture.open(capture_dir)
     state_path = latest_state_path(capture, update)
+    fit_inputs = texture_fit_inputs(capture, chosen_entry(capture, update)) if config.texture_fit is not None else None
     source = source or reconstruction_model(capture, checkpoint)
     # An update's tokens are decoded by the model (a state of another architecture is refused there, by
     # name); a refined state holds its own field.
@@ -104,4 +140,6 @@ def export_capture(capture_dir: str | Path, out_path: str | Path, config: Export
         return standing_on_the_ground(in_metres(transform, vertices, real_size), vertices)
 
     units = "metres" if real_size else "capture units"
-    return export_field(field, out_path, config, placement, progress, units=units), source
+    photos, lighting = fit_inputs if fit_inputs is not None else (None, None)
+    return export_field(field, out_path, config, placement, progress, units=units, photos=photos, lighting=lighting,
+                        should_stop=should_stop), source

@@ -1,6 +1,8 @@
 """Field -> .glb (or .usdz): extract and clean the mesh, unwrap it, bake the materials, write the file.
 
 `export_field` is what `lirm export` and the app call; every stage reports progress and is timed.
+Given the photos and the lighting fitted with the materials, the baked textures are then fitted to
+the photos (photo_texture_fit.py).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from lirm.engine.errors import LirmUserError
 
 from .field_mesh import MeshExtractionConfig, extract_field_mesh
 from .glb_writer import TexturedMesh, write_glb
+from .photo_texture_fit import PhotoViews, TextureFitConfig, TextureFitReport, fit_textures_to_photos
 from .texture_bake import BakeConfig, BakedTextures, bake_textures
 from .uv_atlas import AtlasConfig, UVMesh, unwrap
 
@@ -31,6 +34,9 @@ class ExportConfig:
     normal_map: bool = True
     obj: bool = False  # also write NAME.obj + .mtl + PNGs beside the .glb
     usdz: bool = False  # also write NAME.usdz beside the .glb (the same mesh and textures)
+    # With photos and a fitted lighting given to export_field: the baked textures fitted to the
+    # photos (None: baked only).
+    texture_fit: TextureFitConfig | None = field(default_factory=TextureFitConfig)
 
     def __post_init__(self) -> None:
         if not 64 <= self.texture_size <= 4096:
@@ -46,6 +52,7 @@ class ExportResult:
     seconds: dict[str, float]
     uv_mesh: UVMesh
     textures: BakedTextures
+    texture_fit: TextureFitReport | None = None  # None: the textures are the field's, not fitted to photos
 
 
 def _check_writable(path: Path) -> None:
@@ -57,8 +64,12 @@ def _check_writable(path: Path) -> None:
 
 def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig(),
                  world_transform: np.ndarray | Callable[[np.ndarray], np.ndarray] | None = None,
-                 progress: Progress | None = None, context=None, units: str | None = None) -> ExportResult:
+                 progress: Progress | None = None, context=None, units: str | None = None,
+                 photos: PhotoViews | None = None, lighting=None, should_stop: Callable[[], bool] | None = None) -> ExportResult:
     """`context`: a moderngl context to rasterise with (a headless one is made when None).
+    `photos` and `lighting` (the PanoramaLighting fitted with the materials, in the field's frame):
+    the textures are fitted to the photos after baking (config.texture_fit); `should_stop` ends that
+    fit early (what it reached is kept).
     `world_transform`: a 4x4 from the field's frame to the exported one, or a function of the mesh's
     vertices that returns it (to place the object by its own extent, e.g. standing on the ground)."""
     path = Path(path)
@@ -84,16 +95,25 @@ def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig()
     from lirm.renderer.uv_raster import UVRasterizer
 
     ctx = context or create_headless_context()
-    rasterizer = UVRasterizer(ctx)
+    fit_report = None
     try:
-        raster = rasterizer.rasterize(uv_mesh.positions, uv_mesh.normals, uv_mesh.tangents, uv_mesh.uvs, uv_mesh.faces,
-                                      config.texture_size)
+        rasterizer = UVRasterizer(ctx)
+        try:
+            raster = rasterizer.rasterize(uv_mesh.positions, uv_mesh.normals, uv_mesh.tangents, uv_mesh.uvs, uv_mesh.faces,
+                                          config.texture_size)
+        finally:
+            rasterizer.release()
+        textures = bake_textures(field_, raster, config.bake)
+        seconds["bake"] = time.perf_counter() - t
+        if photos is not None and lighting is not None and config.texture_fit is not None:
+            t = stage(f"fitting the textures to {len(photos.cameras)} photos", 4)
+            textures, fit_report = fit_textures_to_photos(
+                uv_mesh, textures, photos, lighting, ctx, config.texture_fit,
+                progress=(lambda message, k, n: progress(message, 4, steps)) if progress else None, should_stop=should_stop)
+            seconds["texture_fit"] = time.perf_counter() - t
     finally:
-        rasterizer.release()
         if context is None:
             ctx.release()
-    textures = bake_textures(field_, raster, config.bake)
-    seconds["bake"] = time.perf_counter() - t
     t = stage(f"writing {path.name}", 5)
     textured = TexturedMesh(uv_mesh.positions, uv_mesh.normals, uv_mesh.tangents, uv_mesh.uvs, uv_mesh.faces,
                             textures.base_color_srgb8(), textures.metallic_roughness8(),
@@ -114,4 +134,5 @@ def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig()
         write_obj(path.with_suffix(".obj"), textured, world_transform)
     seconds["write"] = time.perf_counter() - t
     stage("done", 6)
-    return ExportResult(path, len(uv_mesh.faces), len(uv_mesh.positions), config.texture_size, seconds, uv_mesh, textures)
+    return ExportResult(path, len(uv_mesh.faces), len(uv_mesh.positions), config.texture_size, seconds, uv_mesh, textures,
+                        fit_report)

@@ -32,6 +32,9 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--lighting", choices=("estimate", "truth"), default="estimate",
                         help="with --materials: inverse-render under the capture-style estimate from the inputs' backgrounds "
                              "(default), or under the environment that really lit them (an oracle: what the estimate costs)")
+    parser.add_argument("--no-texture-fit", action="store_true",
+                        help="with --materials: score the export with the field's baked textures, not fitted to the input "
+                             "photos afterwards (what `lirm export` does for a capture refined with materials)")
     parser.add_argument("--json", type=Path, help="also write every object's numbers here")
     parser.set_defaults(run=run)
 
@@ -47,6 +50,8 @@ def run(args: argparse.Namespace) -> int:
         raise LirmUsageError("--pictures shows the relighting test, which only --materials runs; add --materials")
     if args.lighting == "truth" and not args.materials:
         raise LirmUsageError("--lighting truth lights the inverse rendering, which only --materials runs; add --materials")
+    if args.no_texture_fit and not args.materials:
+        raise LirmUsageError("--no-texture-fit changes the relighting test's export, which only --materials runs; add --materials")
     if args.lighting == "truth" and args.warm_start:
         raise LirmUsageError("--lighting truth is for the budget table, not --warm-start")
     require_range(args, "size", VIEW_SIZE, " pixels")
@@ -71,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             result = run_refine_bench(source.model, objects, EvalConfig(output_views=args.output_views), base, args.minutes,
                                       args.init, progress=bar_updater(bar), pictures=args.pictures,
-                                      true_lighting=args.lighting == "truth")
+                                      true_lighting=args.lighting == "truth", fit_textures=not args.no_texture_fit)
         finally:
             bar.close()
         table = refine_bench_table(result, args.set)

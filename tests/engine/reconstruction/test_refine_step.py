@@ -117,3 +117,16 @@ def test_refine_with_materials_fits_them_under_the_capture_lighting(capture, cap
     pbr = [entry["pbr"] for entry in record["losses"] if "pbr" in entry]
     assert len(pbr) >= 2 and pbr[-1] < pbr[0], record["losses"]
     assert (step / "lighting.hdr").is_file() and (step / "lighting.png").is_file()
+    # Its export fits the baked textures to the photos it was refined on, under that lighting, and
+    # says how far the photometric error fell; --no-texture-fit keeps the field's own textures.
+    import re
+
+    export = ["--grid", "48", "--faces", "2000", "--texture", "128"]
+    capsys.readouterr()
+    assert main(["export", str(capture), "-o", str(capture / "fitted.glb")] + export) == 0
+    fitted = re.search(r"textures fitted to (\d+) photos .* photometric error ([\d.]+) -> ([\d.]+)", capsys.readouterr().out)
+    assert fitted, "the export did not fit its textures"
+    assert int(fitted.group(1)) == len(json.loads((step / "refine.json").read_text())["frames"])
+    assert float(fitted.group(3)) < float(fitted.group(2))
+    assert main(["export", str(capture), "-o", str(capture / "baked.glb"), "--no-texture-fit"] + export) == 0
+    assert "textures fitted" not in capsys.readouterr().out

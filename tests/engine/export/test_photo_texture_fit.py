@@ -1,0 +1,116 @@
+"""Fitting an export's textures to photos (photo_texture_fit.py): through the renderer's G-buffer from
+the photos' cameras, under the fitted lighting, the baked textures move toward what the photos show."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from lirm.engine.cameras import Camera, look_at
+from lirm.engine.export.export_asset import ExportConfig, export_field
+from lirm.engine.export.field_mesh import MeshExtractionConfig
+from lirm.engine.export.photo_texture_fit import (PhotoViews, PixelSamples, TextureFitConfig, fit_textures,
+                                                  mesh_for_rendering)
+from lirm.engine.export.texture_bake import BakedTextures
+from lirm.engine.lighting.panorama_lighting import PanoramaLighting
+from lirm.engine.lighting.split_sum_shading import shade
+from lirm.engine.lighting.camera_response import radiance_to_display_torch
+from lirm.engine.model.analytic_fields import MaterialPattern, SphereField
+from lirm.renderer.pbr_renderer import RenderSettings
+from lirm.renderer.procedural_environments import make_procedural_environment
+
+SMALL = ExportConfig(mesh=MeshExtractionConfig(resolution=48, face_budget=3000), texture_size=128)
+
+
+class _Dielectric(MaterialPattern):
+    def metallic(self, p: torch.Tensor) -> torch.Tensor:
+        return torch.zeros(p.shape[:-1], dtype=p.dtype, device=p.device)
+
+
+CHECKER = _Dielectric(colour_a=(0.8, 0.25, 0.1), colour_b=(0.1, 0.3, 0.7), checker=0.3, roughness_range=(0.6, 0.6))
+GREY = _Dielectric(colour_a=(0.4, 0.4, 0.4), colour_b=(0.4, 0.4, 0.4), roughness_range=(0.6, 0.6))
+
+
+def _cameras(count: int = 8, size: int = 64) -> list[Camera]:
+    return [Camera.from_fov(size, size, 40.0, look_at((2.5 * np.cos(a), 2.5 * np.sin(a), 1.2 * (-1) ** k), (0, 0, 0)))
+            for k, a in enumerate(np.linspace(0.0, 2.0 * np.pi, count, endpoint=False))]
+
+
+def test_fitting_recovers_the_albedo_the_pixels_were_shaded_with():
+    """Without GL: pixels shaded from a known texture under a panorama; the fit, started from grey,
+    brings the sampled texels to it and leaves unseen texels as they were."""
+    g = torch.Generator().manual_seed(0)
+    size, count = 16, 4000
+    truth = torch.rand(size, size, 3, generator=g) * 0.8 + 0.1
+    uv = torch.rand(count, 2, generator=g) * 0.5  # only the top-left quarter of the atlas is seen
+    normal = torch.nn.functional.normalize(torch.randn(count, 3, generator=g), dim=-1)
+    view = torch.nn.functional.normalize(normal + 0.3 * torch.randn(count, 3, generator=g), dim=-1)
+    lighting = PanoramaLighting.from_environment(make_procedural_environment("studio", width=64), height=8)
+    sampled = torch.nn.functional.grid_sample(truth.permute(2, 0, 1)[None], (uv * 2 - 1)[None, None], mode="bilinear",
+                                              padding_mode="border", align_corners=False)[0, :, 0].T
+    with torch.no_grad():
+        colour = radiance_to_display_torch(shade(lighting, sampled, torch.full((count,), 0.5), torch.zeros(count), normal,
+                                                 view).radiance)
+    start = BakedTextures(np.full((size, size, 3), 0.4, np.float32), np.full((size, size), 0.5, np.float32),
+                          np.zeros((size, size), np.float32), np.tile(np.float32([0, 0, 1]), (size, size, 1)),
+                          np.ones((size, size), bool))
+    with torch.no_grad():  # as the evaluation calls it: the fit makes its own gradients
+        fitted, report = fit_textures(start, PixelSamples(uv, normal, view, colour), lighting,
+                                      TextureFitConfig(steps=300, learning_rate=0.05))
+    assert report.pixels == count and report.steps == 300 and report.loss_after < 0.2 * report.loss_before
+    seen = (slice(1, size // 2 - 1), slice(1, size // 2 - 1))
+    error_before = np.abs(start.base_color[seen] - truth.numpy()[seen]).mean()
+    error_after = np.abs(fitted.base_color[seen] - truth.numpy()[seen]).mean()
+    assert error_after < 0.25 * error_before, (error_before, error_after)
+    np.testing.assert_allclose(fitted.base_color[-4:, -4:], 0.4, atol=1e-3)  # never seen: untouched
+    np.testing.assert_array_equal(fitted.normal, start.normal)  # the normal map is not fitted
+    # Stopped before its first step, it keeps what it had.
+    kept, report = fit_textures(start, PixelSamples(uv, normal, view, colour), lighting, should_stop=lambda: True)
+    assert report.stopped and report.steps == 0
+    np.testing.assert_allclose(kept.base_color, start.base_color, atol=1e-3)
+
+
+def test_an_export_fitted_to_photos_of_a_checker_sphere_shows_the_checker(tmp_path, gl_context, renderer):
+    """Photos of a checker sphere rendered by the renderer under an environment; a grey sphere's export,
+    fitted to them under that environment, comes out close to the checker's albedo."""
+    lighting = PanoramaLighting.from_environment(make_procedural_environment("sky", width=128), height=16)
+    environment = lighting.environment("sky 16 x 32")
+    cameras = _cameras()
+    truth = export_field(SphereField(0.5, pattern=CHECKER), tmp_path / "truth.glb", SMALL, context=gl_context)
+    scene = renderer.upload([mesh_for_rendering(truth.uv_mesh, truth.textures)])
+    lit = renderer.prepare_lighting(environment)
+    try:
+        shots = [renderer.render_view(scene, c, lit, RenderSettings(show_environment=False)) for c in cameras]
+    finally:
+        scene.release()
+        lit.maps.release()
+    photos = PhotoViews(cameras, np.stack([s.beauty for s in shots]), np.stack([s.mask for s in shots]))
+
+    baked = export_field(SphereField(0.5, pattern=GREY), tmp_path / "baked.glb", SMALL, context=gl_context)
+    assert baked.texture_fit is None  # no photos, no fit
+    fitted = export_field(SphereField(0.5, pattern=GREY), tmp_path / "fitted.glb", SMALL, context=gl_context,
+                          photos=photos, lighting=lighting)
+    report = fitted.texture_fit
+    assert report is not None and report.views == len(cameras) and report.pixels > 4000
+    assert report.loss_after < 0.3 * report.loss_before, report.summary()
+    assert "texture_fit" in fitted.seconds
+
+    def albedo_error(result) -> float:
+        """The export's albedo against the checker's, seen from the photos' cameras (the G-buffer)."""
+        from lirm.engine.assets.model_loader import load_model
+
+        scene = renderer.upload(load_model(result.path).meshes)
+        lit = renderer.prepare_lighting(environment)
+        try:
+            errors = []
+            for camera, shot in zip(cameras, shots):
+                out = renderer.render_view(scene, camera, lit, RenderSettings(show_environment=False))
+                inside = (out.mask > 0.999) & (shot.mask > 0.999)
+                errors.append(np.abs(out.albedo[inside] - shot.albedo[inside]).mean())
+        finally:
+            scene.release()
+            lit.maps.release()
+        return float(np.mean(errors))
+
+    before, after = albedo_error(baked), albedo_error(fitted)
+    assert after < 0.35 * before, (before, after)

@@ -1,0 +1,45 @@
+"""The lighting tabulated at fixed pixels: the same split-sum terms as the lighting it was built from."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from lirm.engine.lighting.panorama_lighting import PanoramaLighting
+from lirm.engine.lighting.split_sum_shading import shade
+from lirm.engine.lighting.tabulated_lighting import TabulatedLighting
+from lirm.renderer.procedural_environments import make_procedural_environment
+
+
+def _pixels(count: int, seed: int = 0):
+    g = torch.Generator().manual_seed(seed)
+    normals = torch.nn.functional.normalize(torch.randn(count, 3, generator=g), dim=-1)
+    views = torch.nn.functional.normalize(normals + 0.6 * torch.randn(count, 3, generator=g), dim=-1)
+    return normals, views
+
+
+def test_it_shades_as_the_lighting_it_tabulates():
+    panorama = PanoramaLighting.from_environment(make_procedural_environment("studio", width=128), height=16)
+    normals, views = _pixels(400)
+    table = TabulatedLighting(panorama, normals, views, levels=12, chunk=128)  # several chunks
+    g = torch.Generator().manual_seed(1)
+    albedo, metallic = torch.rand(400, 3, generator=g), torch.rand(400, generator=g)
+    with torch.no_grad():
+        for roughness in (torch.full((400,), 4.0 / 11.0), 0.3 + 0.6 * torch.rand(400, generator=g)):
+            exact = shade(panorama, albedo, roughness, metallic, normals, views).radiance
+            tabulated = shade(table, albedo, roughness, metallic, normals, views).radiance
+            # On a tabulated level it is the lighting's own value; between levels within a few per cent.
+            tolerance = 1e-5 if roughness.unique().numel() == 1 else 0.03
+            assert ((tabulated - exact).abs() / exact.clamp(min=1e-3)).median() < tolerance
+            assert ((tabulated - exact).abs().mean() / exact.mean()) < max(tolerance, 0.01)
+
+
+def test_gradients_reach_the_roughness_and_other_pixels_are_refused():
+    panorama = PanoramaLighting.from_environment(make_procedural_environment("sky", width=128), height=16)
+    normals, views = _pixels(50, seed=2)
+    table = TabulatedLighting(panorama, normals, views)
+    roughness = torch.full((50,), 0.35, requires_grad=True)
+    shade(table, torch.full((50, 3), 0.5), roughness, torch.zeros(50), normals, views).radiance.sum().backward()
+    assert roughness.grad is not None and roughness.grad.abs().sum() > 0
+    with pytest.raises(ValueError, match="tabulated for 50 pixels"):
+        table.irradiance_over_pi(normals[:10])
