@@ -152,10 +152,11 @@ def per_object_scores(model, objects: list[HeldoutObject], config: EvalConfig, r
         row = update_scores(config.updates, scores).to_dict()
         keys = ("psnr", "ssim", "albedo_psnr", "roughness_psnr", "metallic_psnr", "chamfer") + (
             RELIGHT_KEYS if relighter is not None else ())
-        rows.append({"object": obj.name, "seconds": refined.seconds, "steps": refined.steps, **{k: row[k] for k in keys}})
+        baked = {k: float(np.mean(v)) for k, v in scores.items() if k.startswith("baked_")}  # RelightConfig.also_baked
+        rows.append({"object": obj.name, "seconds": refined.seconds, "steps": refined.steps, **{k: row[k] for k in keys}, **baked})
     return rows
 
 
 def mean_of(rows: list[dict], key: str) -> float:
-    values = [r[key] for r in rows if r[key] is not None and np.isfinite(r[key])]
+    values = [r[key] for r in rows if r.get(key) is not None and np.isfinite(r[key])]
     return float(np.mean(values)) if values else float("nan")

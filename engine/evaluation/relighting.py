@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -73,6 +73,9 @@ class RelightConfig:
     # Where a row brings its input photos and fitted lighting (the refined rows with materials), the
     # export fits its textures to them, as `lirm export` does for a capture refined with materials.
     fit_textures: bool = True
+    # With the fit on: also score the export with the baked textures, under "baked_" keys (a paired
+    # ablation of the fit on the same refined field: `lirm bench refine --materials --texture-fit both`).
+    also_baked: bool = False
 
 
 class Relighter:
@@ -106,9 +109,9 @@ class Relighter:
         from lirm.engine.export.photo_texture_fit import TextureFitConfig
         from lirm.engine.export.field_mesh import MeshExtractionConfig, NoSurfaceError
 
-        config = ExportConfig(mesh=MeshExtractionConfig(resolution=self.config.grid, face_budget=self.config.faces),
-                              texture_size=self.config.texture,
-                              texture_fit=TextureFitConfig() if self.config.fit_textures else None)
+        mesh = MeshExtractionConfig(resolution=self.config.grid, face_budget=self.config.faces)
+        fitting = self.config.fit_textures and photos is not None and lighting is not None
+        config = ExportConfig(mesh=mesh, texture_size=self.config.texture, texture_fit=TextureFitConfig() if fitting else None)
         with tempfile.TemporaryDirectory(prefix="lirm-relight-") as tmp:
             path = Path(tmp) / "asset.glb"
             try:
@@ -118,25 +121,26 @@ class Relighter:
                     scores.setdefault(key, []).append(float("nan"))
                 return
             model = load_model(path)  # what a user opens: the .glb read back, in its own (the field's) frame
-        lighting = self._lighting_for(obj, truth)
+            if fitting and self.config.also_baked:
+                baked = Path(tmp) / "baked.glb"
+                export_field(field_, baked, replace(config, texture_fit=None), context=self.ctx)
+                baked_scene = self.renderer.upload(load_model(baked).meshes)
+                try:
+                    self._score_scene(baked_scene, obj, truth, outputs, scores, lpips_net, prefix="baked_")
+                finally:
+                    baked_scene.release()
         scene = self.renderer.upload(model.meshes)
-        shown = []
         try:
-            for i in outputs:
-                out = self.renderer.render_view(scene, obj.views.cameras[i], lighting, RenderSettings(show_environment=False, supersample=2))
-                for key, value in relight_metrics(out.radiance, out.mask, truth.radiance[i], truth.mask[i], truth.exposure_ev,
-                                                  lpips_net).items():
-                    scores.setdefault(key, []).append(value)
-                if self.pictures is not None and len(shown) < PICTURE_VIEWS:
-                    shown.append((truth.radiance[i], truth.mask[i], out.radiance))
+            shown = self._score_scene(scene, obj, truth, outputs, scores, lpips_net,
+                                      keep=PICTURE_VIEWS if self.pictures is not None else 0)
             panels = [(truth.name, truth.exposure_ev, shown)]
             also = getattr(obj, "relight_also", None)
             if shown and also is not None:  # the pictures' second environment (not scored)
-                lighting = self._lighting_for(obj, also)
+                second = self._lighting_for(obj, also)
                 views = [i for i in outputs if i in also.radiance][:PICTURE_VIEWS]
                 panels.append((also.name, also.exposure_ev, [
                     (also.radiance[i], also.mask[i], self.renderer.render_view(
-                        scene, obj.views.cameras[i], lighting, RenderSettings(show_environment=False, supersample=2)).radiance)
+                        scene, obj.views.cameras[i], second, RenderSettings(show_environment=False, supersample=2)).radiance)
                     for i in views]))
         finally:
             scene.release()
@@ -145,6 +149,21 @@ class Relighter:
 
             write_relight_picture(self.pictures / f"{_slug(self.row)}__{_slug(obj.name)}.png", panels,
                                   f"{self.row} / {obj.name}")
+
+    def _score_scene(self, scene, obj, truth: RelightTruth, outputs: list[int], scores: dict[str, list[float]], lpips_net,
+                     prefix: str = "", keep: int = 0) -> list:
+        """The relighting metrics of an uploaded export on the output views, appended under
+        `prefix`-ed keys; returns the first `keep` views' (truth, mask, render) for the pictures."""
+        lighting = self._lighting_for(obj, truth)
+        shown = []
+        for i in outputs:
+            out = self.renderer.render_view(scene, obj.views.cameras[i], lighting, RenderSettings(show_environment=False, supersample=2))
+            for key, value in relight_metrics(out.radiance, out.mask, truth.radiance[i], truth.mask[i], truth.exposure_ev,
+                                              lpips_net).items():
+                scores.setdefault(prefix + key, []).append(value)
+            if len(shown) < keep:
+                shown.append((truth.radiance[i], truth.mask[i], out.radiance))
+        return shown
 
     def _lighting_for(self, obj, truth: RelightTruth):
         key = (obj.name, truth.name, truth.rotation_deg)

@@ -48,6 +48,10 @@ class TextureFitConfig:
     fit_materials: bool = True  # False: the albedo alone
     min_photo_alpha: float = 0.99  # photo pixels less covered than this (the mask's soft edge) are left out
     lighting_levels: int = 12  # roughness levels the lighting is tabulated at
+    # At most this many photo pixels (a seeded random subset beyond it): bounds a step's time and the
+    # tabulated lighting's memory for captures of many large photos (16 crops of 128 px give ~100k).
+    max_pixels: int = 300_000
+    seed: int = 0
     dilation: int = 16  # as the bake: texels grown into the gutters
 
     def __post_init__(self) -> None:
@@ -89,6 +93,14 @@ class PixelSamples:
     normal: torch.Tensor  # (N, 3) world shading normal (after the normal map), as the renderer shades
     view: torch.Tensor  # (N, 3) unit surface-to-eye direction
     colour: torch.Tensor  # (N, 3) the photo's display sRGB
+
+    def subset(self, count: int, seed: int = 0) -> "PixelSamples":
+        """At most `count` of the pixels, drawn at random (the same ones for the same seed)."""
+        total = int(self.uv.shape[0])
+        if total <= count:
+            return self
+        keep = torch.randperm(total, generator=torch.Generator().manual_seed(seed))[:count]
+        return PixelSamples(self.uv[keep], self.normal[keep], self.view[keep], self.colour[keep])
 
 
 def mesh_for_rendering(uv_mesh: UVMesh, textures: BakedTextures):
@@ -208,4 +220,5 @@ def fit_textures_to_photos(uv_mesh: UVMesh, textures: BakedTextures, photos: Pho
                            should_stop: Callable[[], bool] | None = None) -> tuple[BakedTextures, TextureFitReport]:
     """Rasterise the export from the photos' cameras (through `context`) and fit its textures to them."""
     samples = sample_photo_pixels(mesh_for_rendering(uv_mesh, textures), photos, context, config.min_photo_alpha)
+    samples = samples.subset(config.max_pixels, config.seed)
     return fit_textures(textures, samples, lighting, config, progress, should_stop, views=len(photos.cameras))

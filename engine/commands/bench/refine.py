@@ -32,9 +32,10 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--lighting", choices=("estimate", "truth"), default="estimate",
                         help="with --materials: inverse-render under the capture-style estimate from the inputs' backgrounds "
                              "(default), or under the environment that really lit them (an oracle: what the estimate costs)")
-    parser.add_argument("--no-texture-fit", action="store_true",
-                        help="with --materials: score the export with the field's baked textures, not fitted to the input "
-                             "photos afterwards (what `lirm export` does for a capture refined with materials)")
+    parser.add_argument("--texture-fit", choices=("on", "off", "both"), default="on",
+                        help="with --materials: the relighting test's export fits its textures to the input photos (on, as "
+                             "`lirm export` does for a capture refined with materials), keeps the field's baked ones (off), "
+                             "or scores both exports of the same refined field (both: a paired ablation)")
     parser.add_argument("--json", type=Path, help="also write every object's numbers here")
     parser.set_defaults(run=run)
 
@@ -50,8 +51,8 @@ def run(args: argparse.Namespace) -> int:
         raise LirmUsageError("--pictures shows the relighting test, which only --materials runs; add --materials")
     if args.lighting == "truth" and not args.materials:
         raise LirmUsageError("--lighting truth lights the inverse rendering, which only --materials runs; add --materials")
-    if args.no_texture_fit and not args.materials:
-        raise LirmUsageError("--no-texture-fit changes the relighting test's export, which only --materials runs; add --materials")
+    if args.texture_fit != "on" and not args.materials:
+        raise LirmUsageError("--texture-fit changes the relighting test's export, which only --materials runs; add --materials")
     if args.lighting == "truth" and args.warm_start:
         raise LirmUsageError("--lighting truth is for the budget table, not --warm-start")
     require_range(args, "size", VIEW_SIZE, " pixels")
@@ -76,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             result = run_refine_bench(source.model, objects, EvalConfig(output_views=args.output_views), base, args.minutes,
                                       args.init, progress=bar_updater(bar), pictures=args.pictures,
-                                      true_lighting=args.lighting == "truth", fit_textures=not args.no_texture_fit)
+                                      true_lighting=args.lighting == "truth", texture_fit=args.texture_fit)
         finally:
             bar.close()
         table = refine_bench_table(result, args.set)

@@ -64,6 +64,11 @@ def test_fitting_recovers_the_albedo_the_pixels_were_shaded_with():
     assert error_after < 0.25 * error_before, (error_before, error_after)
     np.testing.assert_allclose(fitted.base_color[-4:, -4:], 0.4, atol=1e-3)  # never seen: untouched
     np.testing.assert_array_equal(fitted.normal, start.normal)  # the normal map is not fitted
+    # A random subset for captures of many large photos: seeded, and the whole set when it is small.
+    samples = PixelSamples(uv, normal, view, colour)
+    assert samples.subset(count) is samples
+    part = samples.subset(500, seed=3)
+    assert part.uv.shape == (500, 2) and torch.equal(part.colour, samples.subset(500, seed=3).colour)
     # Stopped before its first step, it keeps what it had.
     kept, report = fit_textures(start, PixelSamples(uv, normal, view, colour), lighting, should_stop=lambda: True)
     assert report.stopped and report.steps == 0
