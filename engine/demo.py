@@ -166,6 +166,8 @@ def _reconstruct_and_export(capture_dir: Path, asset_path: Path, config: DemoCon
     export = ExportConfig(mesh=replace(MeshExtractionConfig(), resolution=config.export_grid, face_budget=config.export_faces),
                           texture_size=config.export_texture, usdz=True)
     result, _ = export_capture(capture_dir, asset_path, export, source=source)
+    if result.texture_fit is not None:
+        say(result.texture_fit.summary())
     return result.path, source
 
 
