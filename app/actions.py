@@ -441,7 +441,8 @@ class AppActions:
             return None
         self.state.save_choices()
         args = ["export", str(self.state.capture_dir), "-o", str(out), "--faces", str(settings.faces), "--texture",
-                str(settings.texture), "--grid", str(settings.grid), "--update", str(max(1, self.state.viewing_update)), *self._ckpt()]
+                str(settings.texture), "--grid", str(settings.grid), "--update", str(max(1, self.state.viewing_update)), *self._ckpt(),
+                *([] if settings.fit_textures else ["--no-texture-fit"])]
 
         def done(job: Job) -> None:
             if job.state == "finished":

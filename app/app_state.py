@@ -58,6 +58,7 @@ class ExportSettings:
     texture: int = 1024
     grid: int = 256  # the same default as `lirm export --grid`
     turntable_frames: int = 24
+    fit_textures: bool = True  # a step refined with materials: its textures fitted to the photos (`lirm export`)
 
 
 @dataclass
@@ -223,6 +224,7 @@ class AppState:
         e.texture = take(export, "texture", "texture side", lambda x: _count(x, 16, 16384), de.texture)
         e.grid = take(export, "grid", "export grid", lambda x: _count(x, 16, 2048), de.grid)
         e.turntable_frames = take(export, "turntable_frames", "turntable frames", lambda x: _count(x, 1, 3600), de.turntable_frames)
+        e.fit_textures = take(export, "fit_textures", "texture fit switch", _bool, de.fit_textures)
         return out
 
     def _environment(self, value, dropped: list[str]) -> str:

@@ -108,14 +108,16 @@ def test_old_absolute_paths_into_another_capture_are_rebased_or_dropped(tmp_path
     ("view", "rotation_deg", "north"), ("view", "exposure_ev", float("nan")), ("view", "exposure_ev", 1e9),
     ("view", "background", 1), ("view", "show_cameras", None), ("view", "show_coverage", "no"),
     ("export", "path", 7), ("export", "faces", -5), ("export", "faces", 2.5), ("export", "texture", "big"),
-    ("export", "grid", True), ("export", "turntable_frames", 0), (None, "view", []), (None, "export", "asset.glb"),
+    ("export", "grid", True), ("export", "turntable_frames", 0), ("export", "fit_textures", "yes"), (None, "view", []),
+    (None, "export", "asset.glb"),
 ])
 def test_a_value_that_cannot_be_restored_is_dropped_with_a_message(tmp_path, section, key, bad):
     capture = _capture(tmp_path / "capture")
     good = {"selected": ["0002"], "viewing_update": 1, "auto_update": True, "refine_minutes": 2.0, "refine_materials": False,
             "view": {"channel": "normal", "environment": "overcast", "rotation_deg": 45.0, "exposure_ev": 1.0, "background": False,
                      "show_cameras": False, "show_coverage": True},
-            "export": {"path": "export/mine.glb", "faces": 5000, "texture": 512, "grid": 128, "turntable_frames": 12},
+            "export": {"path": "export/mine.glb", "faces": 5000, "texture": 512, "grid": 128, "turntable_frames": 12,
+                       "fit_textures": False},
             "from_a_newer_version": {"ignored": True}}
     data = json.loads(json.dumps(good))
     (data if section is None else data[section])[key] = bad
