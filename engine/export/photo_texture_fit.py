@@ -48,9 +48,12 @@ class TextureFitConfig:
     fit_materials: bool = True  # False: the albedo alone
     min_photo_alpha: float = 0.99  # photo pixels less covered than this (the mask's soft edge) are left out
     lighting_levels: int = 12  # roughness levels the lighting is tabulated at
+    # A photo channel at or above this is clipped (capture_lighting's level): the camera saw at least
+    # that much, so only a prediction below the level is wrong there (None: plain L1 everywhere).
+    clip_level: float | None = 250.0 / 255.0
     # At most this many photo pixels (a seeded random subset beyond it): bounds a step's time and the
     # tabulated lighting's memory for captures of many large photos (the synthetic set's 16 crops of
-    # 128 px give 62k-131k, the demo's 16 photos more than 300k). On the demo mug 150k left visibly noisier
+    # 128 px give 62k-131k, the demo's 16 photos 463k). On the demo mug 150k left visibly noisier
     # texels than 300k (fewer pixels per texel), for 20 s of fitting against 33 s.
     max_pixels: int = 300_000
     seed: int = 0
@@ -183,11 +186,17 @@ def fit_textures(textures: BakedTextures, samples: PixelSamples, lighting, confi
     optimiser = torch.optim.Adam(params, lr=config.learning_rate)
     roughness_start, metallic_start = torch.sigmoid(roughness0), torch.sigmoid(metallic0)
 
+    clipped = samples.colour >= config.clip_level if config.clip_level is not None else None
+
     def photometric() -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         rough, metal = torch.sigmoid(roughness_logit), torch.sigmoid(metallic_logit)
         shaded = shade(light, _lookup(torch.sigmoid(albedo_logit), grid), _lookup(rough, grid)[:, 0],
                        _lookup(metal, grid)[:, 0], samples.normal, samples.view).radiance
-        return (radiance_to_display_torch(shaded) - samples.colour).abs().mean(), rough, metal
+        predicted = radiance_to_display_torch(shaded)
+        difference = predicted - samples.colour
+        if clipped is not None:  # (the tone curve never reaches 1: a clipped value is compared with the level)
+            difference = torch.where(clipped, (config.clip_level - predicted).clamp(min=0.0), difference)
+        return difference.abs().mean(), rough, metal
 
     with torch.no_grad():
         loss_before = float(photometric()[0])

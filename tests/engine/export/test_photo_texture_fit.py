@@ -3,6 +3,8 @@ the photos' cameras, under the fitted lighting, the baked textures move toward w
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import torch
 
@@ -16,6 +18,7 @@ from lirm.engine.lighting.panorama_lighting import PanoramaLighting
 from lirm.engine.lighting.split_sum_shading import shade
 from lirm.engine.lighting.camera_response import radiance_to_display_torch
 from lirm.engine.model.analytic_fields import MaterialPattern, SphereField
+from lirm.renderer.environment import Environment
 from lirm.renderer.pbr_renderer import RenderSettings
 from lirm.renderer.procedural_environments import make_procedural_environment
 
@@ -119,3 +122,29 @@ def test_an_export_fitted_to_photos_of_a_checker_sphere_shows_the_checker(tmp_pa
 
     before, after = albedo_error(baked), albedo_error(fitted)
     assert after < 0.35 * before, (before, after)
+
+
+def test_a_clipped_photo_pixel_is_only_a_lower_bound():
+    """A photo value at the clip level says the surface was at least that bright: a texel shading
+    brighter is left as it is (no error at all), a darker one is raised."""
+    g = torch.Generator().manual_seed(1)
+    count, size = 500, 8
+    normal = torch.nn.functional.normalize(torch.randn(count, 3, generator=g), dim=-1)
+    samples = PixelSamples(torch.rand(count, 2, generator=g), normal, normal, torch.ones(count, 3))  # all clipped white
+    # A uniform light strong enough that albedo 0.9 shows above the clip level at every pixel.
+    lighting = PanoramaLighting.from_environment(Environment(np.full((8, 16, 3), 40.0, np.float32)), height=8)
+
+    def start(albedo: float) -> BakedTextures:
+        return BakedTextures(np.full((size, size, 3), albedo, np.float32), np.full((size, size), 0.5, np.float32),
+                             np.zeros((size, size), np.float32), np.tile(np.float32([0, 0, 1]), (size, size, 1)),
+                             np.ones((size, size), bool))
+
+    config = TextureFitConfig(steps=50, learning_rate=0.05, fit_materials=False)
+    kept, report = fit_textures(start(0.9), samples, lighting, config)
+    assert report.loss_before == 0.0
+    np.testing.assert_allclose(kept.base_color, 0.9, atol=2e-3)
+    raised, _ = fit_textures(start(0.02), samples, lighting, config)
+    assert raised.base_color.mean() > 0.1
+    # Without the clip level a clipped pixel is an ordinary target: the dark texel is raised all the same.
+    plain, _ = fit_textures(start(0.02), samples, lighting, replace(config, clip_level=None))
+    assert plain.base_color.mean() > 0.1
