@@ -52,21 +52,25 @@ def run(args: argparse.Namespace) -> int:
                           usdz=args.usdz, **({"texture_fit": None} if args.no_texture_fit else {}))
     result, source = export_capture(args.capture, args.out, config, args.checkpoint,
                                     progress=_export_progress, update=args.update)
+    from ..capture.capture_folder import Capture
+    from ..export.capture_export import chosen_entry
+
+    capture = Capture.open(args.capture)
+    # Whether the step exported is a refinement (fitted to the photos, not the weights' alone).
+    refined = chosen_entry(capture, args.update).get("kind") == "refine"
     if not source.trained:
         print(f"WARNING: exported from UNTRAINED weights ({source.description}): the asset does not look like the object", file=sys.stderr)
-    elif source.note and not _exports_a_refinement(args.capture, args.update):
+    elif source.note and not refined:
         # The caveat about the shipped weights, as every command that uses them prints it.
         print(f"about these weights: {source.note}", file=sys.stderr)
     timings = ", ".join(f"{k} {v:.1f} s" for k, v in result.seconds.items())
     print(f"{result.path}: {result.faces} faces, {result.vertices} vertices, {result.texture_size}px textures ({timings})")
     if result.texture_fit is not None:
         print(result.texture_fit.summary())
-    elif _exports_a_refinement(args.capture, args.update) and not args.no_texture_fit:
+    elif refined and not args.no_texture_fit:
         print("textures: the field's own (baked); they are fitted to the photos only for a state refined with materials "
               "(`lirm refine --materials`)")
-    from ..capture.capture_folder import Capture
-
-    real = Capture.open(args.capture).settings.get("real_size")
+    real = capture.settings.get("real_size")
     if real:
         which, metres = next(iter(real.items()))
         print(f"in metres: the object's {which} is {metres:g} m as stated; its base is on y = 0")
@@ -80,13 +84,3 @@ def _export_progress(stage: str, done: int, total: int) -> None:
     progress_events.emit(stage, done, total)
     print(f"[{done}/{total}] {stage}", file=sys.stderr)
 
-
-def _exports_a_refinement(capture: Path, update: int | None) -> bool:
-    """Whether the step `lirm export` takes is a refinement (fitted to the photos, not the weights' alone)."""
-    from ..capture.capture_folder import Capture
-
-    updates = Capture.open(capture).updates
-    if not updates:
-        return False
-    entry = updates[-1] if update is None or not 1 <= update <= len(updates) else updates[update - 1]
-    return entry.get("kind") == "refine"

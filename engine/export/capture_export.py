@@ -127,8 +127,9 @@ def export_capture(capture_dir: str | Path, out_path: str | Path, config: Export
     the state after that update instead of the latest. A state refined with materials has its
     textures fitted to its photos (config.texture_fit; `should_stop` ends that fit early)."""
     capture = Capture.open(capture_dir)
-    state_path = latest_state_path(capture, update)
-    fit_inputs = texture_fit_inputs(capture, chosen_entry(capture, update)) if config.texture_fit is not None else None
+    entry = chosen_entry(capture, update)
+    state_path = capture.root / entry["state"]
+    fit_inputs = texture_fit_inputs(capture, entry) if config.texture_fit is not None else None
     source = source or reconstruction_model(capture, checkpoint)
     # An update's tokens are decoded by the model (a state of another architecture is refused there, by
     # name); a refined state holds its own field.
