@@ -76,6 +76,9 @@ class RelightConfig:
     # With the fit on: also score the export with the baked textures, under "baked_" keys (a paired
     # ablation of the fit on the same refined field: `lirm bench refine --materials --texture-fit both`).
     also_baked: bool = False
+    # With the fit on: also score the export fitted without the metal search, under "plain_" keys
+    # (`lirm bench refine --materials --texture-fit search-both`).
+    also_plain_fit: bool = False
 
 
 class Relighter:
@@ -121,14 +124,17 @@ class Relighter:
                     scores.setdefault(key, []).append(float("nan"))
                 return
             model = load_model(path)  # what a user opens: the .glb read back, in its own (the field's) frame
-            if fitting and self.config.also_baked:
-                baked = Path(tmp) / "baked.glb"
-                export_field(field_, baked, replace(config, texture_fit=None), context=self.ctx)
-                baked_scene = self.renderer.upload(load_model(baked).meshes)
+            extra = [("baked_", None)] if fitting and self.config.also_baked else []
+            if fitting and self.config.also_plain_fit:
+                extra.append(("plain_", TextureFitConfig(metal_search=False)))
+            for prefix, fit in extra:
+                other = Path(tmp) / f"{prefix}asset.glb"
+                export_field(field_, other, replace(config, texture_fit=fit), context=self.ctx, photos=photos, lighting=lighting)
+                other_scene = self.renderer.upload(load_model(other).meshes)
                 try:
-                    self._score_scene(baked_scene, obj, truth, outputs, scores, lpips_net, prefix="baked_")
+                    self._score_scene(other_scene, obj, truth, outputs, scores, lpips_net, prefix=prefix)
                 finally:
-                    baked_scene.release()
+                    other_scene.release()
         scene = self.renderer.upload(model.meshes)
         try:
             shown = self._score_scene(scene, obj, truth, outputs, scores, lpips_net,

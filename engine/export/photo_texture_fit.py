@@ -34,6 +34,7 @@ from lirm.engine.lighting.camera_response import radiance_to_display_torch
 from lirm.engine.lighting.split_sum_shading import shade
 from lirm.engine.lighting.tabulated_lighting import TabulatedLighting
 
+from .metal_search import AS_FITTED, DIELECTRIC, METAL, choose_hypotheses
 from .texture_bake import BakedTextures, dilate
 from .uv_atlas import UVMesh
 
@@ -58,12 +59,21 @@ class TextureFitConfig:
     max_pixels: int = 300_000
     seed: int = 0
     dilation: int = 16  # as the bake: texels grown into the gutters
+    # Each texel's material chosen among three fits before the joint one (metal_search.py): the field's
+    # metallic, metallic held at 0, held at 1. Finds metal the field left as paint (README: its worth).
+    metal_search: bool = True
+    search_steps: int = 100  # steps of each of the three fits (150 gave the same relighting)
+    search_final_steps: int = 100  # steps of the joint fit after the choice (instead of `steps`)
+    metal_search_sigma: float = 2.0  # texels: the neighbourhood whose summed error each choice reads
+    metal_search_margin: float = 0.1  # the field's hypothesis is kept unless another's error is this share lower
 
     def __post_init__(self) -> None:
         if self.steps < 0:
             raise ValueError(f"steps must be >= 0, got {self.steps}")
         if not self.learning_rate > 0:
             raise ValueError(f"learning_rate must be positive, got {self.learning_rate}")
+        if self.search_steps < 1 or self.search_final_steps < 0:
+            raise ValueError(f"the metal search needs at least 1 step per fit, got {self.search_steps}")
 
 
 @dataclass
@@ -84,10 +94,16 @@ class TextureFitReport:
     loss_before: float  # mean photometric L1 (display values) of the baked textures
     loss_after: float
     stopped: bool = False
+    metal_share: float | None = None  # of the covered texels, chosen as metal by the metal search (None: no search)
+    dielectric_share: float | None = None  # chosen as paint (metallic 0) against the field's metallic
 
     def summary(self) -> str:
-        return (f"textures fitted to {self.views} photos ({self.pixels} pixels, {self.steps} steps, {self.seconds:.1f} s): "
+        text = (f"textures fitted to {self.views} photos ({self.pixels} pixels, {self.steps} steps, {self.seconds:.1f} s): "
                 f"photometric error {self.loss_before:.4f} -> {self.loss_after:.4f}")
+        if self.metal_share is not None:
+            text += (f"; metal search: {100 * self.metal_share:.1f}% of the texels metal, "
+                     f"{100 * self.dielectric_share:.1f}% paint, the rest as the field had them")
+        return text
 
 
 @dataclass
@@ -153,6 +169,9 @@ def sample_photo_pixels(mesh, photos: PhotoViews, context, min_photo_alpha: floa
     return PixelSamples(as_tensor(uv, 2), n, as_tensor(view, 3), as_tensor(colour, 3))
 
 
+METAL_HELD = (0.02, 0.98)  # the metallic the dielectric and metal hypotheses are held at (logits stay finite)
+
+
 def _logit(values: np.ndarray) -> torch.Tensor:
     return torch.logit(torch.from_numpy(np.clip(values, 0.01, 0.99).astype(np.float32)))
 
@@ -164,66 +183,149 @@ def _lookup(texture: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
                          align_corners=False)[0, :, 0].T
 
 
+class _Shading:
+    """The photometric error of texture logits at the sampled pixels, under the tabulated lighting."""
+
+    def __init__(self, samples: PixelSamples, lighting, config: TextureFitConfig):
+        self.samples = samples
+        self.light = TabulatedLighting(lighting, samples.normal, samples.view, config.lighting_levels)
+        self.grid = (samples.uv * 2.0 - 1.0)[None, None]
+        self.clip_level = config.clip_level
+        self.clipped = samples.colour >= config.clip_level if config.clip_level is not None else None
+
+    def errors(self, albedo_logit: torch.Tensor, roughness_logit: torch.Tensor, metallic_logit: torch.Tensor) -> torch.Tensor:
+        """(N, 3) absolute display-value error per pixel and channel."""
+        grid, samples = self.grid, self.samples
+        shaded = shade(self.light, _lookup(torch.sigmoid(albedo_logit), grid), _lookup(torch.sigmoid(roughness_logit), grid)[:, 0],
+                       _lookup(torch.sigmoid(metallic_logit), grid)[:, 0], samples.normal, samples.view).radiance
+        predicted = radiance_to_display_torch(shaded)
+        difference = predicted - samples.colour
+        if self.clipped is not None:  # (the tone curve never reaches 1: a clipped value is compared with the level)
+            difference = torch.where(self.clipped, (self.clip_level - predicted).clamp(min=0.0), difference)
+        return difference.abs()
+
+
+@dataclass
+class _Logits:
+    albedo: torch.Tensor  # (S, S, 3)
+    roughness: torch.Tensor  # (S, S, 1)
+    metallic: torch.Tensor  # (S, S, 1)
+
+
+def _fit(shading: _Shading, start: _Logits, config: TextureFitConfig, steps: int, fit_metallic: bool,
+         prior: tuple[torch.Tensor, torch.Tensor], progress: Callable[[int], None] | None = None,
+         should_stop: Callable[[], bool] | None = None) -> tuple[_Logits, int, bool]:
+    """Adam on the logits from `start` for `steps`; roughness (and metallic when fitted) held to
+    `prior` (their values, (S, S, 1)) by the quadratic prior. Returns the logits, the steps taken and
+    whether `should_stop` ended it."""
+    albedo = torch.nn.Parameter(start.albedo.clone())
+    roughness = torch.nn.Parameter(start.roughness.clone())
+    metallic = torch.nn.Parameter(start.metallic.clone())
+    params = [albedo] + ([roughness] + ([metallic] if fit_metallic else []) if config.fit_materials else [])
+    optimiser = torch.optim.Adam(params, lr=config.learning_rate)
+    taken, stopped = 0, False
+    with torch.enable_grad():  # callers score under no_grad (the evaluation); this fit needs its gradients
+        for step in range(steps):
+            if should_stop is not None and should_stop():
+                stopped = True
+                break
+            loss = shading.errors(albedo, roughness, metallic).mean()
+            if config.fit_materials and config.material_prior:
+                held = ((torch.sigmoid(roughness) - prior[0]) ** 2).mean()
+                if fit_metallic:
+                    held = held + ((torch.sigmoid(metallic) - prior[1]) ** 2).mean()
+                loss = loss + config.material_prior * held
+            optimiser.zero_grad()
+            loss.backward()
+            optimiser.step()
+            taken = step + 1
+            if progress is not None:
+                progress(step)
+    return _Logits(albedo.detach(), roughness.detach(), metallic.detach()), taken, stopped
+
+
 def fit_textures(textures: BakedTextures, samples: PixelSamples, lighting, config: TextureFitConfig = TextureFitConfig(),
                  progress: Progress | None = None, should_stop: Callable[[], bool] | None = None,
                  views: int = 0) -> tuple[BakedTextures, TextureFitReport]:
     """The textures fitted to the sampled photo pixels under `lighting` (a PanoramaLighting or any
-    lighting `shade` accepts); the normal map and coverage are kept."""
+    lighting `shade` accepts); the normal map and coverage are kept. With config.metal_search, each
+    texel's material is first chosen among three fits (metal_search.py), then fitted jointly."""
     start = time.perf_counter()
     count = int(samples.uv.shape[0])
     if count == 0 or config.steps == 0:
         return textures, TextureFitReport(views, count, 0, time.perf_counter() - start, float("nan"), float("nan"))
     if isinstance(lighting, torch.nn.Module):  # the fit runs on the CPU: a copy there, the caller's stays put
         lighting = copy.deepcopy(lighting).cpu().requires_grad_(False)
-    light = TabulatedLighting(lighting, samples.normal, samples.view, config.lighting_levels)
-    grid = (samples.uv * 2.0 - 1.0)[None, None]
-    albedo0 = _logit(textures.base_color)
-    roughness0, metallic0 = _logit(textures.roughness[..., None]), _logit(textures.metallic[..., None])
-    albedo_logit = torch.nn.Parameter(albedo0.clone())
-    roughness_logit = torch.nn.Parameter(roughness0.clone())
-    metallic_logit = torch.nn.Parameter(metallic0.clone())
-    params = [albedo_logit] + ([roughness_logit, metallic_logit] if config.fit_materials else [])
-    optimiser = torch.optim.Adam(params, lr=config.learning_rate)
-    roughness_start, metallic_start = torch.sigmoid(roughness0), torch.sigmoid(metallic0)
+    shading = _Shading(samples, lighting, config)
+    baked = _Logits(_logit(textures.base_color), _logit(textures.roughness[..., None]), _logit(textures.metallic[..., None]))
+    searching = config.metal_search and config.fit_materials
+    final_steps = config.search_final_steps if searching else config.steps
+    total = final_steps + (3 * config.search_steps if searching else 0)
+    done = 0
 
-    clipped = samples.colour >= config.clip_level if config.clip_level is not None else None
-
-    def photometric() -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        rough, metal = torch.sigmoid(roughness_logit), torch.sigmoid(metallic_logit)
-        shaded = shade(light, _lookup(torch.sigmoid(albedo_logit), grid), _lookup(rough, grid)[:, 0],
-                       _lookup(metal, grid)[:, 0], samples.normal, samples.view).radiance
-        predicted = radiance_to_display_torch(shaded)
-        difference = predicted - samples.colour
-        if clipped is not None:  # (the tone curve never reaches 1: a clipped value is compared with the level)
-            difference = torch.where(clipped, (config.clip_level - predicted).clamp(min=0.0), difference)
-        return difference.abs().mean(), rough, metal
+    def tick(step: int) -> None:
+        if progress and (done + step) % 20 == 0:
+            what = "choosing metal or not per texel" if searching and done < 3 * config.search_steps else "fitting the textures to the photos"
+            progress(f"{what} ({done + step}/{total})", done + step, total)
 
     with torch.no_grad():
-        loss_before = float(photometric()[0])
-    steps, stopped = 0, False
-    with torch.enable_grad():  # callers score under no_grad (the evaluation); this fit needs its gradients
-        for step in range(config.steps):
-            if should_stop is not None and should_stop():
-                stopped = True
-                break
-            loss, rough, metal = photometric()
-            if config.fit_materials and config.material_prior:
-                loss = loss + config.material_prior * (((rough - roughness_start) ** 2).mean() + ((metal - metallic_start) ** 2).mean())
-            optimiser.zero_grad()
-            loss.backward()
-            optimiser.step()
-            steps = step + 1
-            if progress and step % 20 == 0:
-                progress(f"fitting the textures to the photos ({step}/{config.steps})", step, config.steps)
+        loss_before = float(shading.errors(baked.albedo, baked.roughness, baked.metallic).mean())
+    stopped, steps, choice = False, 0, None
+    begin = baked
+    prior = (torch.sigmoid(baked.roughness), torch.sigmoid(baked.metallic))
+    if searching:
+        begin, prior, choice, steps, stopped = _search_metal(shading, baked, textures.base_color.shape[0], config, tick,
+                                                              should_stop)
+        done = steps
+    if not stopped:
+        fitted, taken, stopped = _fit(shading, begin, config, final_steps, True, prior, tick, should_stop)
+        steps += taken
+    else:
+        fitted = begin
     with torch.no_grad():
-        loss_after = float(photometric()[0])
-        fitted = lambda logit: torch.sigmoid(logit).numpy()  # noqa: E731
+        loss_after = float(shading.errors(fitted.albedo, fitted.roughness, fitted.metallic).mean())
+        as_texture = lambda logit: torch.sigmoid(logit).numpy()  # noqa: E731
         covered = textures.covered
-        out = BakedTextures(dilate(fitted(albedo_logit), covered, config.dilation),
-                            dilate(fitted(roughness_logit), covered, config.dilation)[..., 0],
-                            dilate(fitted(metallic_logit), covered, config.dilation)[..., 0],
+        out = BakedTextures(dilate(as_texture(fitted.albedo), covered, config.dilation),
+                            dilate(as_texture(fitted.roughness), covered, config.dilation)[..., 0],
+                            dilate(as_texture(fitted.metallic), covered, config.dilation)[..., 0],
                             textures.normal, covered)
-    return out, TextureFitReport(views, count, steps, time.perf_counter() - start, loss_before, loss_after, stopped)
+    report = TextureFitReport(views, count, steps, time.perf_counter() - start, loss_before, loss_after, stopped)
+    if choice is not None:
+        report.metal_share = choice.share(METAL, covered)
+        report.dielectric_share = choice.share(DIELECTRIC, covered)
+    return out, report
+
+
+def _search_metal(shading: _Shading, baked: _Logits, size: int, config: TextureFitConfig, tick: Callable[[int], None],
+                  should_stop: Callable[[], bool] | None):
+    """Three fits (metallic as the field has it, held at 0, held at 1), the per-texel choice among
+    them, and where the joint fit then starts and what its prior holds roughness and metallic to."""
+    low = torch.full_like(baked.metallic, float(torch.logit(torch.tensor(METAL_HELD[0]))))
+    high = torch.full_like(baked.metallic, float(torch.logit(torch.tensor(METAL_HELD[1]))))
+    starts = {AS_FITTED: baked, DIELECTRIC: _Logits(baked.albedo, baked.roughness, low),
+              METAL: _Logits(baked.albedo, baked.roughness, high)}
+    roughness_prior, metallic_prior = torch.sigmoid(baked.roughness), torch.sigmoid(baked.metallic)
+    fits, errors, steps = {}, [], 0
+    for which in (AS_FITTED, DIELECTRIC, METAL):
+        offset = steps
+        fits[which], taken, stopped = _fit(shading, starts[which], config, config.search_steps, which == AS_FITTED,
+                                           (roughness_prior, metallic_prior), lambda step: tick(offset + step), should_stop)
+        steps += taken
+        if stopped:  # cancelled mid-search: what the field's own hypothesis reached is kept
+            return fits[AS_FITTED], (roughness_prior, metallic_prior), None, steps, True
+        with torch.no_grad():
+            e = fits[which]
+            errors.append(shading.errors(e.albedo, e.roughness, e.metallic).sum(-1).numpy())
+    choice = choose_hypotheses(errors, shading.samples.uv.numpy(), size, config.metal_search_sigma, config.metal_search_margin)
+    picked = torch.from_numpy(choice.choice.astype(np.int64))[..., None]
+
+    def pick(name: str) -> torch.Tensor:
+        parts = [getattr(fits[k], name) for k in (AS_FITTED, DIELECTRIC, METAL)]
+        return torch.where(picked == METAL, parts[METAL], torch.where(picked == DIELECTRIC, parts[DIELECTRIC], parts[AS_FITTED]))
+
+    begin = _Logits(pick("albedo"), pick("roughness"), pick("metallic"))
+    return begin, (torch.sigmoid(begin.roughness), torch.sigmoid(begin.metallic)), choice, steps, False
 
 
 def fit_textures_to_photos(uv_mesh: UVMesh, textures: BakedTextures, photos: PhotoViews, lighting, context,

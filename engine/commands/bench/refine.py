@@ -32,10 +32,11 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--lighting", choices=("estimate", "truth"), default="estimate",
                         help="with --materials: inverse-render under the capture-style estimate from the inputs' backgrounds "
                              "(default), or under the environment that really lit them (an oracle: what the estimate costs)")
-    parser.add_argument("--texture-fit", choices=("on", "off", "both"), default="on",
+    parser.add_argument("--texture-fit", choices=("on", "off", "both", "search-both"), default="on",
                         help="with --materials: the relighting test's export fits its textures to the input photos (on, as "
                              "`lirm export` does for a capture refined with materials), keeps the field's baked ones (off), "
-                             "or scores both exports of the same refined field (both: a paired ablation)")
+                             "scores both exports of the same refined field (both: a paired ablation), or scores the fit "
+                             "with and without its metal search (search-both)")
     parser.add_argument("--json", type=Path, help="also write every object's numbers here")
     parser.set_defaults(run=run)
 

@@ -11,18 +11,21 @@ from lirm.engine.cli import main
 
 
 @pytest.mark.slow
-def test_bench_refine_with_materials_scores_them_and_draws_the_relighting(tmp_path, capsys):
+@pytest.mark.parametrize("texture_fit, prefix, title", [("both", "baked_", "exported with the field's baked textures"),
+                                                        ("search-both", "plain_", "without the metal search")])
+def test_bench_refine_with_materials_scores_them_and_draws_the_relighting(tmp_path, capsys, texture_fit, prefix, title):
     assert main(["bench", "refine", "--objects", "1", "--size", "48", "--output-views", "1", "--minutes", "0.05",
                  "--init", "hull", "--materials", "--pictures", str(tmp_path / "pictures"), "--json", str(tmp_path / "r.json"),
-                 "--texture-fit", "both"]) == 0
+                 "--texture-fit", texture_fit]) == 0
     table = capsys.readouterr().out
     assert "| budget (min) | PSNR ↑ | SSIM ↑ | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ | CD ↓ |" in table
     assert "| budget (min) | relight PSNR-H ↑ | relight PSNR-L ↑ |" in table
     budget = json.loads((tmp_path / "r.json").read_text())["budgets"][0]
     assert all(np.isfinite(budget[k]) for k in ("roughness_psnr", "metallic_psnr", "relight_psnr_h", "relight_psnr_l"))
-    # --texture-fit both: the same field's export with its baked textures is scored too, apart.
-    assert "exported with the field's baked textures" in table
-    assert np.isfinite(budget["baked_relight_psnr_l"]) and budget["baked_relight_psnr_l"] != budget["relight_psnr_l"]
+    # --texture-fit both: the same field's export with its baked textures is scored too, apart; search-both:
+    # the same field's export fitted without the metal search.
+    assert title in table
+    assert np.isfinite(budget[prefix + "relight_psnr_l"]) and budget[prefix + "relight_psnr_l"] != budget["relight_psnr_l"]
     assert [p.name for p in (tmp_path / "pictures").iterdir()] == ["hull_0.05_min__vase_0.png"]
 
 

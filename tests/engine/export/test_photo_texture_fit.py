@@ -59,7 +59,7 @@ def test_fitting_recovers_the_albedo_the_pixels_were_shaded_with():
                           np.ones((size, size), bool))
     with torch.no_grad():  # as the evaluation calls it: the fit makes its own gradients
         fitted, report = fit_textures(start, PixelSamples(uv, normal, view, colour), lighting,
-                                      TextureFitConfig(steps=300, learning_rate=0.05))
+                                      TextureFitConfig(steps=300, learning_rate=0.05, metal_search=False))
     assert report.pixels == count and report.steps == 300 and report.loss_after < 0.2 * report.loss_before
     seen = (slice(1, size // 2 - 1), slice(1, size // 2 - 1))
     error_before = np.abs(start.base_color[seen] - truth.numpy()[seen]).mean()
@@ -73,9 +73,50 @@ def test_fitting_recovers_the_albedo_the_pixels_were_shaded_with():
     part = samples.subset(500, seed=3)
     assert part.uv.shape == (500, 2) and torch.equal(part.colour, samples.subset(500, seed=3).colour)
     # Stopped before its first step, it keeps what it had.
-    kept, report = fit_textures(start, PixelSamples(uv, normal, view, colour), lighting, should_stop=lambda: True)
-    assert report.stopped and report.steps == 0
-    np.testing.assert_allclose(kept.base_color, start.base_color, atol=1e-3)
+    for search in (False, True):
+        kept, report = fit_textures(start, PixelSamples(uv, normal, view, colour), lighting, TextureFitConfig(metal_search=search),
+                                    should_stop=lambda: True)
+        assert report.stopped and report.steps == 0
+        np.testing.assert_allclose(kept.base_color, start.base_color, atol=1e-3)
+
+
+def test_the_metal_search_finds_metal_that_the_field_left_as_paint():
+    """Without GL: an atlas whose left half is gold metal and right half yellow paint, each texel seen
+    from many directions under the studio; the baked textures start as the field usually leaves them
+    (grey paint, metallic 0). The plain fit, held to the field's metallic, keeps the gold as paint; the
+    metal search makes the left half metal and leaves the right half paint, and explains the pixels
+    better."""
+    g = torch.Generator().manual_seed(1)
+    size, count = 16, 12000
+    uv = torch.rand(count, 2, generator=g)
+    texel = (uv * size).long().clamp(max=size - 1)
+    # One normal per texel (a texel is one surface point), spread over the sphere by its position.
+    angle = (texel[:, 0].float() + 0.5) / size * 2.0 * np.pi
+    height = (texel[:, 1].float() + 0.5) / size * 1.6 - 0.8
+    normal = torch.stack([torch.cos(angle) * (1 - height**2).sqrt(), torch.sin(angle) * (1 - height**2).sqrt(), height], -1)
+    view = torch.nn.functional.normalize(normal + 0.7 * torch.randn(count, 3, generator=g), dim=-1)
+    facing = (view * normal).sum(-1) > 0.2
+    uv, normal, view, metal_half = uv[facing], normal[facing], view[facing], uv[facing, 0] < 0.5
+    gold, paint = torch.tensor([1.0, 0.76, 0.33]), torch.tensor([0.75, 0.55, 0.15])
+    albedo = torch.where(metal_half[:, None], gold, paint)
+    roughness = torch.where(metal_half, 0.3, 0.5)
+    lighting = PanoramaLighting.from_environment(make_procedural_environment("studio", width=64), height=8)
+    with torch.no_grad():
+        colour = radiance_to_display_torch(shade(lighting, albedo, roughness, metal_half.float(), normal, view).radiance)
+    start = BakedTextures(np.full((size, size, 3), 0.4, np.float32), np.full((size, size), 0.5, np.float32),
+                          np.zeros((size, size), np.float32), np.tile(np.float32([0, 0, 1]), (size, size, 1)),
+                          np.ones((size, size), bool))
+    samples = PixelSamples(uv, normal, view, colour)
+    left, right = (slice(2, size - 2), slice(1, size // 2 - 2)), (slice(2, size - 2), slice(size // 2 + 2, size - 1))
+    with torch.no_grad():
+        plain, plain_report = fit_textures(start, samples, lighting, TextureFitConfig(metal_search=False))
+        searched, report = fit_textures(start, samples, lighting, TextureFitConfig(metal_search=True))
+    assert plain_report.metal_share is None and "metal search" not in plain_report.summary()
+    assert plain.metallic[left].mean() < 0.3, plain.metallic[left].mean()
+    assert searched.metallic[left].mean() > 0.7 and searched.metallic[right].mean() < 0.3, (
+        searched.metallic[left].mean(), searched.metallic[right].mean())
+    assert 0.35 < report.metal_share < 0.65 and "metal search" in report.summary()
+    assert report.loss_after < 0.7 * plain_report.loss_after, (report.loss_after, plain_report.loss_after)
 
 
 def test_an_export_fitted_to_photos_of_a_checker_sphere_shows_the_checker(tmp_path, gl_context, renderer):
