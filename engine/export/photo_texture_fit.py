@@ -17,6 +17,10 @@ Roughness and metallic are held to the field's values by a quadratic prior: a ha
 little about them per texel, and without it they scatter into noise. Texels no photo pixel samples
 keep the field's values. On the held-out synthetic set it raised the relighting PSNR (README,
 "Lighting and materials").
+
+That prior also keeps metal the field left as paint from being found by the gradient (a local
+minimum: metal_search.py), so by default each texel's material is first chosen among three fits
+(the field's metallic, metallic held at 0, held at 1) and the joint fit starts from the choice.
 """
 
 from __future__ import annotations
@@ -73,7 +77,8 @@ class TextureFitConfig:
         if not self.learning_rate > 0:
             raise ValueError(f"learning_rate must be positive, got {self.learning_rate}")
         if self.search_steps < 1 or self.search_final_steps < 0:
-            raise ValueError(f"the metal search needs at least 1 step per fit, got {self.search_steps}")
+            raise ValueError(f"the metal search needs search_steps >= 1 and search_final_steps >= 0, "
+                             f"got {self.search_steps} and {self.search_final_steps}")
 
 
 @dataclass
