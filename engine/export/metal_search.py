@@ -29,7 +29,6 @@ AS_FITTED, DIELECTRIC, METAL = 0, 1, 2  # hypothesis indices, in the order the e
 @dataclass
 class MetalChoice:
     choice: np.ndarray  # (S, S) int8: AS_FITTED, DIELECTRIC or METAL per texel
-    pixels: np.ndarray  # (S, S) float: the neighbourhood's photo-pixel count each choice read
 
     def share(self, which: int, covered: np.ndarray) -> float:
         """Share of the covered texels that took hypothesis `which`."""
@@ -69,4 +68,4 @@ def choose_hypotheses(errors: list[np.ndarray], uv: np.ndarray, size: int, sigma
     pixels = _neighbourhood_sum(np.ones(len(texels)), texels, size, sigma)
     choice = np.argmin(sums, axis=0).astype(np.int8)
     choice[pixels < min_pixels] = AS_FITTED
-    return MetalChoice(choice, pixels)
+    return MetalChoice(choice)
