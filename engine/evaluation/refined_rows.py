@@ -94,7 +94,8 @@ def input_lighting(obj: HeldoutObject, indices: list[int], refine: RefineConfig)
     masks = {i: np.where(chosen.mask[k] > 0.5, 255, 0).astype(np.uint8) for k, i in enumerate(indices)}
     cameras = {i: chosen.cameras[k] for k, i in enumerate(indices)}
     estimate = estimate_capture_lighting(images, masks, cameras, CaptureLightingConfig(proxy_radius=50.0))
-    return PanoramaLighting.from_capture_lighting(estimate, refine.lighting_height, refine.lighting_sharpest_lobe)
+    return PanoramaLighting.from_capture_lighting(estimate, refine.lighting_height, refine.lighting_sharpest_lobe,
+                                                  refine.light_lobes)
 
 
 def oracle_lighting(obj: HeldoutObject, renderer):

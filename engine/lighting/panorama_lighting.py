@@ -9,6 +9,11 @@ light). The split-sum pieces:
   Gaussian lobe around it (the usual fit of GGX, sharpness 2 / alpha^2 about the half vector, so
   1 / (2 alpha^2) about the reflected direction), its width never below the texel spacing;
 - the BRDF table (A, B): integrated once in numpy (renderer/brdf_reference.py) and cached.
+
+Optionally, compact lights (`light_lobes`): spherical Gaussian lobes with a free axis, colour and
+width, added to the panorama's texels. The smoothness term (total variation of the log radiance)
+prices a small bright source far above a broad dim glow of the same energy, so without them a sun
+or a lamp no photo saw comes out as a low, wide glow; a lobe carries one at no smoothness cost.
 """
 
 from __future__ import annotations
@@ -36,7 +41,7 @@ def brdf_table(size: int = 32, samples: int = 4096) -> torch.Tensor:
 
 
 class PanoramaLighting(torch.nn.Module):
-    def __init__(self, log_radiance: torch.Tensor, sharpest_lobe_texels: float = 1.0):
+    def __init__(self, log_radiance: torch.Tensor, sharpest_lobe_texels: float = 1.0, light_lobes: int = 0):
         super().__init__()
         height, width = log_radiance.shape[:2]
         self.log_radiance = torch.nn.Parameter(log_radiance.clone().float())
@@ -48,19 +53,39 @@ class PanoramaLighting(torch.nn.Module):
         # The narrowest specular lobe, in texels (a texel spans pi / height): below it a lower roughness
         # changes nothing, so the fit cannot tell a glaze from a satin finish there.
         self.min_lobe_cos = math.cos(sharpest_lobe_texels * math.pi / height)
+        if light_lobes:
+            self._add_light_lobes(light_lobes, log_radiance)
+
+    def _add_light_lobes(self, count: int, log_radiance: torch.Tensor) -> None:
+        """`count` lobes spread over the upper hemisphere (one: the zenith), each about 30 degrees wide,
+        its peak as bright as the panorama's median: a start the fit moves from, not a guess."""
+        golden = math.pi * (3.0 - math.sqrt(5.0))
+        axes = []
+        for k in range(count):
+            z = 1.0 - (k + 0.5) / count * 0.7 if count > 1 else 1.0  # elevations from about 90 to 17 degrees
+            r = math.sqrt(max(0.0, 1.0 - z * z))
+            axes.append((r * math.cos(k * golden), r * math.sin(k * golden), z))
+        peak = log_radiance.reshape(-1, 3).median(0).values.float()
+        self.lobe_axes = torch.nn.Parameter(torch.tensor(axes, dtype=torch.float32))
+        self.lobe_log_amplitude = torch.nn.Parameter(peak[None].repeat(count, 1))
+        self.lobe_log_sharpness = torch.nn.Parameter(torch.full((count,), math.log(8.0)))
+        # No narrower than the texel spacing: a narrower lobe would fall between texel centres.
+        self.max_lobe_sharpness = 2.0 / (1.0 - math.cos(math.pi / log_radiance.shape[0]))
 
     @classmethod
-    def from_environment(cls, environment: Environment, height: int = 16, sharpest_lobe_texels: float = 1.0) -> "PanoramaLighting":
+    def from_environment(cls, environment: Environment, height: int = 16, sharpest_lobe_texels: float = 1.0,
+                         light_lobes: int = 0) -> "PanoramaLighting":
         """Area-average `environment` down to height x 2 height texels."""
         mean = _area_mean(environment.radiance, environment, height)
-        return cls(torch.from_numpy(np.log(np.maximum(mean, 1e-4))), sharpest_lobe_texels)
+        return cls(torch.from_numpy(np.log(np.maximum(mean, 1e-4))), sharpest_lobe_texels, light_lobes)
 
     @classmethod
-    def from_capture_lighting(cls, lighting, height: int = 16, sharpest_lobe_texels: float = 1.0) -> "PanoramaLighting":
+    def from_capture_lighting(cls, lighting, height: int = 16, sharpest_lobe_texels: float = 1.0,
+                              light_lobes: int = 0) -> "PanoramaLighting":
         """From a capture's estimate (capture_lighting.CaptureLighting): starts as its filled panorama
         and keeps what the photos saw as an observation (`observation_loss`); clipped texels are
         lower bounds only."""
-        panorama = cls.from_environment(lighting.environment, height, sharpest_lobe_texels)
+        panorama = cls.from_environment(lighting.environment, height, sharpest_lobe_texels, light_lobes)
         env = lighting.environment
         seen = (lighting.observed > 0).astype(np.float64)
         clipped = seen * lighting.clipped
@@ -78,20 +103,39 @@ class PanoramaLighting(torch.nn.Module):
         clipped value (the light there was at least that bright)."""
         if not hasattr(self, "observed_log"):
             return self.log_radiance.new_zeros(())
-        difference = self.log_radiance - self.observed_log
+        log_total = self.log_radiance if not self.light_lobes else self.radiance.clamp(min=1e-6).log()
+        difference = log_total - self.observed_log
         unclipped = (1.0 - self.clipped_share)[..., None]
         per_texel = unclipped * difference.abs() + (1.0 - unclipped) * (-difference).clamp(min=0.0)
         weight = self.seen_share[..., None]
         return (weight * per_texel).sum() / weight.sum().clamp(min=1e-6) / 3.0
 
     def smoothness_loss(self) -> torch.Tensor:
-        """Total variation of the log radiance (wrapping in longitude): unseen light stays plausible."""
+        """Total variation of the log radiance (wrapping in longitude): unseen light stays plausible.
+        The compact lights' lobes are not part of it."""
         x = self.log_radiance
         return (x - x.roll(1, dims=1)).abs().mean() + (x[1:] - x[:-1]).abs().mean()
 
     @property
+    def light_lobes(self) -> int:
+        return self.lobe_axes.shape[0] if hasattr(self, "lobe_axes") else 0
+
+    @property
     def radiance(self) -> torch.Tensor:
-        return self.log_radiance.exp()
+        if not self.light_lobes:
+            return self.log_radiance.exp()
+        return self.log_radiance.exp() + self.lobe_radiance().reshape(self.log_radiance.shape)
+
+    def lobe_radiance(self) -> torch.Tensor:
+        """(texels, 3): the compact lights on the panorama's texels, each lobe's sampled values scaled
+        so that their sum over solid angle is its exact integral (no energy gained or lost as a narrow
+        lobe moves between texel centres)."""
+        axes = self.lobe_axes / self.lobe_axes.norm(dim=-1, keepdim=True).clamp(min=1e-6)
+        sharpness = self.lobe_log_sharpness.exp().clamp(0.5, self.max_lobe_sharpness)
+        shape = torch.exp(sharpness[:, None] * (axes @ self.directions.T - 1.0))  # (lobes, texels)
+        exact = 2.0 * math.pi * (1.0 - torch.exp(-2.0 * sharpness)) / sharpness
+        shape = shape * (exact / (shape * self.solid_angle).sum(-1).clamp(min=1e-12))[:, None]
+        return shape.T @ self.lobe_log_amplitude.exp()
 
     def environment(self, name: str = "as photographed (refined)") -> Environment:
         return Environment(self.radiance.detach().cpu().numpy().astype(np.float32), name=name)

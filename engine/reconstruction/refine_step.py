@@ -163,7 +163,8 @@ def _refine_locked(capture_dir, source: ModelSource, config: RefineConfig, init:
             notes.append("no lighting estimate in the capture (`lirm capture --resume` makes one): the materials "
                          "are not inverse-rendered")
         else:
-            lighting = PanoramaLighting.from_capture_lighting(estimate, config.lighting_height, config.lighting_sharpest_lobe)
+            lighting = PanoramaLighting.from_capture_lighting(estimate, config.lighting_height, config.lighting_sharpest_lobe,
+                                                                    config.light_lobes)
     try:
         result = refine_field(refinable, views, config, grid, progress, cancel, live, live_every, lighting=lighting,
                               start_has_materials=started_from not in ("carved hull", "scratch"))

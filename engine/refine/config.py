@@ -99,6 +99,9 @@ class RefineConfig:
     lighting_lr: float = 3e-2
     lighting_height: int = 16  # the fitted panorama's rows (x 2 columns)
     lighting_sharpest_lobe: float = 1.0  # the narrowest specular lobe of the fitted panorama, in texels
+    # Compact lights fitted beside the panorama (panorama_lighting.py: spherical Gaussians outside its
+    # smoothness term), for a sun or lamp no photo saw.
+    light_lobes: int = 0
     # The material prior holds roughness and metallic to the starting field's where that is a
     # prediction (LIRM, an earlier refinement) rather than to 0.5 and 0 (README: what it was worth).
     anchor_materials: bool = True

@@ -9,7 +9,7 @@ from lirm.engine.lighting.capture_lighting import CaptureLighting, CaptureLighti
 from lirm.engine.lighting.panorama_lighting import PanoramaLighting
 from lirm.engine.lighting.split_sum_shading import shade
 from lirm.renderer.environment import Environment
-from lirm.renderer.procedural_environments import make_procedural_environment
+from lirm.renderer.procedural_environments import PROCEDURAL_ENVIRONMENTS, make_procedural_environment
 
 
 def test_a_uniform_panorama_lights_every_normal_and_lobe_alike():
@@ -59,3 +59,39 @@ def test_below_the_sharpest_lobe_roughness_changes_nothing_and_a_finer_floor_let
         with torch.no_grad():
             glaze, satin = (panorama.prefiltered(direction, torch.tensor([r])) for r in (0.1, 0.2))
         assert bool((glaze - satin).abs().max() > 1e-4 * satin.abs().max()) == differs, texels
+
+
+def test_a_compact_light_keeps_its_energy_and_stays_outside_the_smoothness_term():
+    lighting = PanoramaLighting(torch.zeros(16, 32, 3), light_lobes=2)
+    assert lighting.light_lobes == 2
+    smooth_before = float(lighting.smoothness_loss())
+    energies = []
+    for sharpness in (2.0, 30.0, 100.0):  # broad to about a texel wide
+        with torch.no_grad():
+            lighting.lobe_log_sharpness.fill_(np.log(sharpness))
+            lighting.lobe_axes.copy_(torch.tensor([[0.31, 0.17, 0.93], [0.9, -0.1, 0.3]]))
+        lobes = lighting.lobe_radiance()
+        energies.append(float((lobes[:, 0] * lighting.solid_angle).sum()))
+        exact = 2 * (2 * np.pi * (1 - np.exp(-2 * sharpness)) / sharpness)  # two lobes of peak 1 (exp(0))
+        assert abs(energies[-1] - exact) < 1e-3 * exact
+    total = lighting.environment().radiance
+    assert total.max() > 1.5 and total.min() >= 1.0 - 1e-6  # the lobes add to the panorama's texels
+    assert float(lighting.smoothness_loss()) == smooth_before == 0.0
+
+
+def test_a_compact_light_fitted_to_the_shading_of_a_sunlit_object_finds_the_sun():
+    sky = make_procedural_environment("sky", width=256)
+    truth = PanoramaLighting.from_environment(sky, 16)
+    normals = torch.nn.functional.normalize(torch.randn(400, 3, generator=torch.Generator().manual_seed(1)), dim=-1)
+    with torch.no_grad():
+        target = truth.irradiance_over_pi(normals)
+        flat = float(truth.radiance.median())
+    fit = PanoramaLighting(torch.full((16, 32, 3), np.log(flat)), light_lobes=1)  # a dull sky, a lobe at the zenith
+    optimiser = torch.optim.Adam([fit.lobe_axes, fit.lobe_log_amplitude, fit.lobe_log_sharpness], lr=0.05)
+    for _ in range(300):
+        optimiser.zero_grad()
+        (fit.irradiance_over_pi(normals) - target).abs().mean().backward()
+        optimiser.step()
+    axis = torch.nn.functional.normalize(fit.lobe_axes.detach(), dim=-1)[0].numpy()
+    sun = PROCEDURAL_ENVIRONMENTS["sky"].sun_direction
+    assert np.degrees(np.arccos(np.clip(axis @ sun, -1, 1))) < 25.0
