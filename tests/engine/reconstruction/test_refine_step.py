@@ -77,6 +77,14 @@ def test_refine_is_a_step_of_the_history_that_export_and_suggest_read(capture, t
     assert "refinement 3" in capsys.readouterr().out
 
 
+def test_light_lobes_need_the_materials_and_a_sane_count(capture, capsys):
+    assert main(["refine", str(capture), "--light-lobes", "1"] + QUICK) == 2
+    assert "add --materials" in capsys.readouterr().err
+    assert main(["refine", str(capture), "--materials", "--light-lobes", "20"] + QUICK) == 2
+    assert "0..8" in capsys.readouterr().err
+    assert not (capture / "reconstruction" / "update_01").exists()
+
+
 def test_a_cancelled_refinement_leaves_the_history_as_it_was(capture):
     assert main(["reconstruct", str(capture), "--updates", "1"] + FAST_UPDATE) == 0
     before = (capture / "capture.json").read_text()
@@ -111,9 +119,10 @@ def test_refine_with_materials_fits_them_under_the_capture_lighting(capture, cap
     observed[32:] = 5  # the lower half seen, as a capture's backgrounds see it
     CaptureLighting(make_procedural_environment("studio", width=128), observed, np.zeros((64, 128)), 8,
                     CaptureLightingConfig()).save(capture)
-    assert main(["refine", str(capture), "--materials"] + steps) == 0
+    assert main(["refine", str(capture), "--materials", "--light-lobes", "1"] + steps) == 0
     step = capture / "reconstruction" / "update_02"
     record = json.loads((step / "refine.json").read_text())
+    assert record["settings"]["light_lobes"] == 1
     pbr = [entry["pbr"] for entry in record["losses"] if "pbr" in entry]
     assert len(pbr) >= 2 and pbr[-1] < pbr[0], record["losses"]
     assert (step / "lighting.hdr").is_file() and (step / "lighting.png").is_file()
