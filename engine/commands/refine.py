@@ -57,6 +57,10 @@ def run(args: argparse.Namespace) -> int:
         raise LirmUsageError(f"--live-every must be positive, got {args.live_every}")
     if args.minutes is not None and not args.minutes > 0:
         raise LirmUsageError(f"--minutes must be positive, got {args.minutes}")
+    if args.light_lobes and not args.materials:
+        raise LirmUsageError("--light-lobes shapes the lighting fitted with the materials; add --materials")
+    if not 0 <= args.light_lobes <= 8:
+        raise LirmUsageError(f"--light-lobes must lie in 0..8, got {args.light_lobes}")
     require_capture(args.capture)
     check_output(args.capture, "the capture folder", folder=True)
     if args.live is not None:
@@ -65,10 +69,6 @@ def run(args: argparse.Namespace) -> int:
     device = ("cuda" if torch.cuda.is_available() else "cpu") if args.device == "auto" else args.device
     if device.startswith("cuda") and not torch.cuda.is_available():
         raise LirmUserError("--device cuda: no CUDA device is available here; use --device cpu")
-    if args.light_lobes and not args.materials:
-        raise LirmUsageError("--light-lobes shapes the lighting fitted with the materials; add --materials")
-    if not 0 <= args.light_lobes <= 8:
-        raise LirmUsageError(f"--light-lobes must lie in 0..8, got {args.light_lobes}")
     overrides = {"device": device, "inverse_rendering": bool(args.materials), "light_lobes": args.light_lobes}
     if args.minutes is not None:
         overrides["minutes"] = args.minutes
