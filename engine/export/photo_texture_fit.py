@@ -142,7 +142,7 @@ def mesh_for_rendering(uv_mesh: UVMesh, textures: BakedTextures):
 
 def sample_photo_pixels(mesh, photos: PhotoViews, context, min_photo_alpha: float = 0.99) -> PixelSamples:
     """Rasterise `mesh` (MeshData) from every photo's camera and keep the pixels that both the render
-    (fully covered, not an edge) and the photo's mask call object."""
+    (fully covered, not an edge, a finite normal) and the photo's mask call object."""
     from lirm.renderer.environment import Environment
     from lirm.renderer.pbr_renderer import PBRRenderer, RenderSettings
 
@@ -157,7 +157,10 @@ def sample_photo_pixels(mesh, photos: PhotoViews, context, min_photo_alpha: floa
             if out.mask.shape != mask.shape:
                 raise ValueError(f"a photo of {mask.shape[1]}x{mask.shape[0]} px has a camera of "
                                  f"{out.mask.shape[1]}x{out.mask.shape[0]} px")
-            use = (out.mask > 0.999) & (np.asarray(mask) >= min_photo_alpha)
+            # A pixel whose G-buffer is not finite (a zero vertex normal normalised to NaN) cannot be
+            # shaded, and one NaN reaching the BRDF table's lookup would end the whole fit.
+            finite = np.isfinite(out.normal).all(-1) & np.isfinite(out.uv).all(-1)
+            use = (out.mask > 0.999) & (np.asarray(mask) >= min_photo_alpha) & finite
             _, directions = camera.pixel_rays()
             uv.append(out.uv[use])
             normal.append(out.normal[use])

@@ -12,7 +12,7 @@ from lirm.engine.cameras import Camera, look_at
 from lirm.engine.export.export_asset import ExportConfig, export_field
 from lirm.engine.export.field_mesh import MeshExtractionConfig
 from lirm.engine.export.photo_texture_fit import (PhotoViews, PixelSamples, TextureFitConfig, fit_textures,
-                                                  mesh_for_rendering)
+                                                  mesh_for_rendering, sample_photo_pixels)
 from lirm.engine.export.texture_bake import BakedTextures
 from lirm.engine.lighting.panorama_lighting import PanoramaLighting
 from lirm.engine.lighting.split_sum_shading import shade
@@ -189,3 +189,22 @@ def test_a_clipped_photo_pixel_is_only_a_lower_bound():
     # Without the clip level a clipped pixel is an ordinary target: the dark texel is raised all the same.
     plain, _ = fit_textures(start(0.02), samples, lighting, replace(config, clip_level=None))
     assert plain.base_color.mean() > 0.1
+
+
+def test_pixels_whose_normal_is_not_finite_are_left_out_of_the_samples(gl_context):
+    """A triangle whose vertex normals are zero renders NaN normals (GLSL normalize(0)); its pixels are
+    not samples, so no NaN reaches the shading, and the rest of the surface still is."""
+    from lirm.renderer.mesh import MeshData
+
+    positions = np.array([[-0.5, -0.5, 0], [0.5, -0.5, 0], [0.5, 0.5, 0], [-0.5, 0.5, 0]], np.float32)
+    uvs = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32)
+    healthy = np.tile(np.float32([0, 0, 1]), (4, 1))
+    broken = healthy.copy()
+    broken[[0, 2, 3]] = 0.0  # the second triangle's three normals
+    camera = Camera.from_fov(32, 32, 40.0, look_at((0.0, -0.3, 2.0), (0, 0, 0), up=(0, 1, 0)))
+    photos = PhotoViews([camera], np.full((1, 32, 32, 3), 0.5, np.float32), np.ones((1, 32, 32), np.float32))
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    whole = sample_photo_pixels(MeshData(positions, faces, normals=healthy, uvs=uvs), photos, gl_context)
+    kept = sample_photo_pixels(MeshData(positions, faces, normals=broken, uvs=uvs), photos, gl_context)
+    assert torch.isfinite(kept.normal).all() and torch.isfinite(kept.uv).all()
+    assert 0.3 * len(whole.normal) < len(kept.normal) < 0.7 * len(whole.normal), (len(kept.normal), len(whole.normal))
