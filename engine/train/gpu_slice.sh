@@ -1,0 +1,59 @@
+#!/bin/bash
+# One GPU slice of issue 22, as one command on the lent GPU machine (see README "Training", GPU slices).
+#
+# Prepare here once: ../shared/tools/gpu-machine-prep.sh (wheels in .whl/, GL loaders in .gl/); then call
+# the device tool with carry [".whl", ".gl"] and the command `bash engine/train/gpu_slice.sh SECONDS`,
+# where SECONDS is the wall time this script may use (it must end inside the call's limit).
+# It installs the project, checks EGL, times the update loop (paper at 512 and 256 px, small; bf16),
+# measures the data generator, then trains `small` stage 1 until its deadline, resuming from
+# resources/checkpoints/lirm-small-resume.safetensors when that exists. What comes back in $OUT:
+# the float16 resume copy split in 15 MiB parts (slim.part*; `cat slim.part* > F` joins them) and
+# logs.tar.gz (metrics.csv, eval.csv, run json, loss curves, timings, the log).
+set -u
+budget=${1:-540}
+t0=$(date +%s)
+left() { echo $((budget - ($(date +%s) - t0))); }
+OUT=${OUT:-/tmp/out}
+mkdir -p "$OUT" /tmp/slice
+log=/tmp/slice/log.txt
+exec > >(tee -a "$log") 2>&1
+export PYTHONUNBUFFERED=1
+
+device=${DEVICE:-cuda}  # DEVICE=cpu: a dry run of the plumbing here (nothing installed, tiny budgets)
+if [ "$device" = cuda ]; then
+  for f in .gl/*.deb; do dpkg -x "$f" /; done; ldconfig
+  python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl &&
+    python3 -m pip install -q --no-index --no-deps --no-build-isolation --target /tmp/site . || exit 1
+  export PYTHONPATH=/tmp/site
+  vendor=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
+  [ -f "$vendor" ] && export __EGL_VENDOR_LIBRARY_FILENAMES=$vendor
+  nvidia-smi --query-gpu=name,memory.total --format=csv
+fi
+lirm="python3 -m lirm.engine.cli"
+python3 -c "import moderngl; c = moderngl.create_standalone_context(backend='egl'); print('EGL:', c.info['GL_RENDERER'])" || exit 1
+echo "[$(left) s left] installed"
+
+# Update-loop timings (bf16 autocast on CUDA), each bounded so a hang cannot eat the slice.
+timeout ${T_BENCH:-60} $lirm bench model --preset paper --device $device --updates 4 --no-baseline --json /tmp/slice/bench_paper512.json
+timeout ${T_BENCH:-45} $lirm bench model --preset paper --device $device --updates 4 --no-baseline --image-size 256 --json /tmp/slice/bench_paper256.json
+timeout ${T_BENCH:-45} $lirm bench model --preset small --device $device --updates 4 --no-baseline --json /tmp/slice/bench_small.json
+# One process's synthetic-scene rate on this machine's EGL (the training runs many such processes).
+timeout ${T_BENCH:-45} $lirm bench synth --scenes 6 --views 8 --size 256
+echo "[$(left) s left] timings done"
+
+resume=()
+[ -f resources/checkpoints/lirm-small-resume.safetensors ] && resume=(--resume resources/checkpoints/lirm-small-resume.safetensors)
+$lirm train --preset "${PRESET:-small}" --stage 1 --stage-steps "${STAGE_STEPS:-3000}" --batch-scenes "${BATCH_SCENES:-16}" \
+  --workers "${WORKERS:-14}" --device $device --out /tmp/slice/run --checkpoint-every 100000 \
+  --eval-every "${EVAL_EVERY:-100}" --eval-objects 2 --slim-copy /tmp/slice/slim.safetensors "${resume[@]}" &
+pid=$!
+# Stop training with room to finish the step, save, write the copy and pack: SIGINT to the trainer
+# alone (it saves at the end of its step); its data-loader workers end with it.
+( sleep $(( $(left) - ${STOP_MARGIN:-60} )); kill -INT $pid 2>/dev/null ) &
+wait $pid
+echo "[$(left) s left] training returned $?"
+
+cp /tmp/slice/run/metrics.csv /tmp/slice/run/eval.csv /tmp/slice/run/stage1_run.json /tmp/slice/run/loss_curves.png /tmp/slice/ 2>/dev/null
+[ -f /tmp/slice/slim.safetensors ] && split -b 15M -d /tmp/slice/slim.safetensors "$OUT/slim.part"
+tar -C /tmp/slice -czf "$OUT/logs.tar.gz" --exclude run --exclude slim.safetensors .
+echo "[$(left) s left] packed: $(ls "$OUT")"
