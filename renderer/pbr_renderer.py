@@ -84,6 +84,8 @@ class PBRRenderer:
         self._fullscreen_tonemap = ctx.vertex_array(self.tonemap_program, [])
         self.channel_program = ctx.program(vertex_shader=shader_source("fullscreen.vert"), fragment_shader=shader_source("channel_view.frag"))
         self._fullscreen_channel = ctx.vertex_array(self.channel_program, [])
+        self.resolve_program = ctx.program(vertex_shader=shader_source("fullscreen.vert"), fragment_shader=shader_source("resolve_supersample.frag"))
+        self._fullscreen_resolve = ctx.vertex_array(self.resolve_program, [])
         self.baker = IBLBaker(ctx, ibl_config)
         self._targets: dict[tuple[int, int], _GBuffer] = {}
 
@@ -107,8 +109,11 @@ class PBRRenderer:
         target = self._target(int(cam.width), int(cam.height))
         self._draw_gbuffer(target, scene, cam, lighting, settings)
         self._tonemap(target.texture("radiance"), target.display_fbo, settings)
-        out = target.read()
-        return _downsample(out, k) if k > 1 else out
+        if k == 1:
+            return target.read()
+        resolved = self._target(int(camera.width), int(camera.height), _ResolvedBuffer)
+        self._resolve(target, resolved, k)
+        return resolved.read()
 
     # ---- window ------------------------------------------------------------------------------
     def draw_to_framebuffer(self, framebuffer: moderngl.Framebuffer, scene: GpuScene, camera, lighting: Lighting, settings: RenderSettings = RenderSettings()) -> None:
@@ -212,13 +217,25 @@ class PBRRenderer:
         _set(prog, "u_tonemapper", TONEMAPPERS.index(settings.tonemapper))
         self._fullscreen_tonemap.render(moderngl.TRIANGLES, vertices=3)
 
-    def _target(self, width: int, height: int) -> "_GBuffer":
-        key = (width, height)
+    def _resolve(self, source: "_GBuffer", target: "_ResolvedBuffer", factor: int) -> None:
+        target.fbo.use()
+        prog = self.resolve_program
+        for unit, name in enumerate(GBUFFER_ATTACHMENTS):
+            source.texture(name).use(unit)
+            _set(prog, f"u_{name}", unit)
+        source.display.use(len(GBUFFER_ATTACHMENTS))
+        _set(prog, "u_display", len(GBUFFER_ATTACHMENTS))
+        _set(prog, "u_factor", factor)
+        self._fullscreen_resolve.render(moderngl.TRIANGLES, vertices=3)
+
+    def _target(self, width: int, height: int, kind: type | None = None):
+        kind = kind or _GBuffer
+        key = (width, height, kind)
         if key not in self._targets:
-            if len(self._targets) >= 4:  # sizes change rarely; keep a few, drop the oldest
+            if len(self._targets) >= 6:  # sizes change rarely; keep a few, drop the oldest
                 oldest = next(iter(self._targets))
                 self._targets.pop(oldest).release()
-            self._targets[key] = _GBuffer(self.ctx, width, height)
+            self._targets[key] = kind(self.ctx, width, height)
         return self._targets[key]
 
     def release(self) -> None:
@@ -226,8 +243,9 @@ class PBRRenderer:
             target.release()
         self._targets = {}
         self.baker.release()
-        for obj in (self._fullscreen, self._fullscreen_tonemap, self._fullscreen_channel, self.mesh_program,
-                    self.background_program, self.tonemap_program, self.channel_program):
+        for obj in (self._fullscreen, self._fullscreen_tonemap, self._fullscreen_channel, self._fullscreen_resolve,
+                    self.mesh_program, self.background_program, self.tonemap_program, self.channel_program,
+                    self.resolve_program):
             obj.release()
 
 
@@ -273,6 +291,35 @@ class _GBuffer:
             obj.release()
 
 
+class _ResolvedBuffer:
+    """The output-size G-buffer that resolve_supersample.frag writes: the five G-buffer attachments
+    (albedo's alpha = coverage) and the averaged display image, all float."""
+
+    def __init__(self, ctx: moderngl.Context, width: int, height: int):
+        self.size = (width, height)
+        self.textures = [ctx.texture((width, height), 4, dtype="f4") for _ in range(len(GBUFFER_ATTACHMENTS) + 1)]
+        self.fbo = ctx.framebuffer(color_attachments=self.textures)
+
+    def read(self) -> RenderOutput:
+        w, h = self.size
+
+        def rgba(i: int) -> np.ndarray:
+            data = np.frombuffer(self.fbo.read(components=4, attachment=i, dtype="f4"), dtype=np.float32)
+            return data.reshape(h, w, 4)[::-1]  # GL rows start at the bottom
+
+        radiance, albedo, material, normal_depth, uv, beauty = (rgba(i) for i in range(len(self.textures)))
+        return RenderOutput(
+            beauty=beauty[:, :, :3].copy(), radiance=radiance[:, :, :3].copy(), albedo=albedo[:, :, :3].copy(),
+            roughness=material[:, :, 0].copy(), metallic=material[:, :, 1].copy(), occlusion=material[:, :, 2].copy(),
+            normal=normal_depth[:, :, :3].copy(), depth=normal_depth[:, :, 3].copy(), mask=albedo[:, :, 3].copy(),
+            uv=uv[:, :, :2].copy(),
+        )
+
+    def release(self) -> None:
+        for obj in (self.fbo, *self.textures):
+            obj.release()
+
+
 def _scaled_camera(camera, k: int):
     return SimpleNamespace(
         width=int(camera.width) * k, height=int(camera.height) * k,
@@ -280,8 +327,9 @@ def _scaled_camera(camera, k: int):
     )
 
 
-def _downsample(out: RenderOutput, k: int) -> RenderOutput:
-    """Box-filter k x k blocks; G-buffer channels average over covered sub-pixels only."""
+def downsample_reference(out: RenderOutput, k: int) -> RenderOutput:
+    """Box-filter k x k blocks; G-buffer channels average over covered sub-pixels only. The numpy
+    reference of resolve_supersample.frag, which render_view uses (tests hold the two together)."""
 
     def blocks(a: np.ndarray) -> np.ndarray:
         h, w = a.shape[0] // k, a.shape[1] // k

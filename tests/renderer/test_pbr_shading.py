@@ -241,3 +241,28 @@ def test_rendering_survives_another_headless_context_made_and_released(renderer,
     other.release()
     out = render_one(renderer, [uv_sphere(material=PBRMaterial(base_color_factor=(1.0, 1.0, 1.0, 1.0)))], front_camera(), uniform_lighting)
     assert (out.mask > 0.5).sum() > 2000
+
+
+@pytest.mark.parametrize("factor", [2, 3])
+def test_supersampled_render_is_resolved_on_the_gpu_as_the_numpy_reference_does(renderer, factor):
+    from lirm.renderer.pbr_renderer import downsample_reference
+
+    rng = np.random.default_rng(factor)
+    panorama = rng.uniform(0.05, 3.0, size=(32, 64, 3)).astype(np.float32)  # lighting that varies per pixel
+    lighting = renderer.prepare_lighting(Environment(panorama, name="noise"))
+    base = rng.integers(0, 256, size=(16, 16, 3), dtype=np.uint8)
+    mr = rng.integers(0, 256, size=(16, 16, 3), dtype=np.uint8)
+    meshes = [uv_sphere(radius=0.6, material=PBRMaterial(base_color_texture=base, metallic_roughness_texture=mr)),
+              uv_sphere(radius=0.4, center=(0.5, -0.5, 0.3), material=PBRMaterial(base_color_factor=(0.9, 0.2, 0.1, 1.0),
+                                                                                  metallic_factor=0.0, roughness_factor=0.3))]
+    camera = front_camera(size=48, distance=3.0)
+    big = Camera.from_fov(48 * factor, 48 * factor, 40.0, camera.c2w)
+    try:
+        resolved = render_one(renderer, meshes, camera, lighting, supersample=factor)
+        reference = downsample_reference(render_one(renderer, meshes, big, lighting), factor)
+    finally:
+        lighting.maps.release()
+    edge = (reference.mask > 0) & (reference.mask < 1)
+    assert edge.sum() > 30 and (reference.mask == 1).sum() > 300  # edges and interiors both tested
+    for name in ("beauty", "radiance", "albedo", "roughness", "metallic", "occlusion", "normal", "depth", "mask", "uv"):
+        np.testing.assert_allclose(getattr(resolved, name), getattr(reference, name), atol=2e-5, rtol=1e-5, err_msg=name)
