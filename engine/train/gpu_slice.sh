@@ -44,14 +44,18 @@ echo "[$(left) s left] timings done"
 resume=()
 [ -f resources/checkpoints/lirm-small-resume.safetensors ] && resume=(--resume resources/checkpoints/lirm-small-resume.safetensors)
 $lirm train --preset "${PRESET:-small}" --stage 1 --stage-steps "${STAGE_STEPS:-3000}" --batch-scenes "${BATCH_SCENES:-16}" \
-  --workers "${WORKERS:-14}" --device $device --out /tmp/slice/run --checkpoint-every 100000 \
+  --workers "${WORKERS:-14}" --device $device --out /tmp/slice/run --checkpoint-every "${CHECKPOINT_EVERY:-100}" \
   --eval-every "${EVAL_EVERY:-100}" --eval-objects 2 --slim-copy /tmp/slice/slim.safetensors "${resume[@]}" &
 pid=$!
-# Stop training with room to finish the step, save, write the copy and pack: SIGINT to the trainer
-# alone (it saves at the end of its step); its data-loader workers end with it.
-( sleep $(( $(left) - ${STOP_MARGIN:-60} )); kill -INT $pid 2>/dev/null ) &
+# The deadline is kept whatever the trainer is doing: a first SIGINT (to the trainer alone) stops at
+# the end of its step with a checkpoint; a second, 25 s later, interrupts a step still waiting for its
+# data (the slim copy is written on the way out); 20 s after that it is killed and what exists is packed.
+stop_at=$(( $(left) - ${STOP_MARGIN:-75} ))
+( sleep "$stop_at"; kill -INT $pid 2>/dev/null; sleep 25; kill -INT $pid 2>/dev/null; sleep 20; kill -KILL $pid 2>/dev/null ) &
+watchdog=$!
 wait $pid
 echo "[$(left) s left] training returned $?"
+kill $watchdog 2>/dev/null
 
 cp /tmp/slice/run/metrics.csv /tmp/slice/run/eval.csv /tmp/slice/run/stage1_run.json /tmp/slice/run/loss_curves.png /tmp/slice/ 2>/dev/null
 [ -f /tmp/slice/slim.safetensors ] && split -b 15M -d /tmp/slice/slim.safetensors "$OUT/slim.part"

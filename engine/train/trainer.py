@@ -118,6 +118,21 @@ def inverse_beta(stage: StageConfig, step: int) -> float:
     return start + (end - start) * min(step / max(stage.steps - 1, 1), 1.0)
 
 
+class StopRequests:
+    """The SIGINT handler: the first Ctrl-C stops at the end of the step (with a checkpoint); a second
+    one interrupts at once, also while the step waits for its data, and the slim copy is still written
+    on the way out (a GPU slice's deadline cannot wait for a slow data loader)."""
+
+    def __init__(self) -> None:
+        self.requested = False
+
+    def __call__(self, *_signal) -> None:
+        if self.requested:
+            raise KeyboardInterrupt("second stop request: interrupting the step")
+        self.requested = True
+        log.warning("stopping at the end of this step (Ctrl-C again to stop at once, keeping only the slim copy)")
+
+
 class TrainingStream(IterableDataset):
     """The samples of steps [start, end) for one process; data-loader workers take turns by step,
     so the loader returns them in step order."""
@@ -255,10 +270,10 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
             evaluator = PeriodicEvaluator(out_dir / "eval.csv", config.eval_objects,
                                           config.eval_size or min(128, model.config.image_size), start_step)
 
-    stop = {"requested": False}
+    stop = StopRequests()
     previous_handler = None
     try:
-        previous_handler = signal.signal(signal.SIGINT, lambda *_: stop.update(requested=True))
+        previous_handler = signal.signal(signal.SIGINT, stop)
     except ValueError:  # not the main thread (the app runs training in a worker)
         pass
     history: list[dict] = []
@@ -312,10 +327,12 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
                     progress(record)
             if done % config.checkpoint_every == 0 or done == end_step:
                 checkpoint = _save(out_dir, model, optimizer, config.stage, done, run, info)
+                if info.is_main and config.slim_copy:  # kept current too: a killed run still leaves one to resume from
+                    save_slim_checkpoint(Path(config.slim_copy), model, config.stage, done, run)
             if evaluator is not None and (done % config.eval_every == 0 or done == end_step):
                 evaluator.run(model, done, writer)
                 model.train()
-            if any_process(stop["requested"] or bool(cancel and cancel()), info):
+            if any_process(stop.requested or bool(cancel and cancel()), info):
                 if done % config.checkpoint_every and done != end_step:
                     checkpoint = _save(out_dir, model, optimizer, config.stage, done, run, info)
                 stopped_early = done < end_step

@@ -160,3 +160,29 @@ def test_cli_train_reports_broken_environment_files_and_goes_on(tmp_path, shared
     (envs / "good.hdr").unlink()
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert done.returncode == 3 and "no usable HDR environments" in done.stderr
+
+
+def test_a_second_ctrl_c_stops_at_once_and_still_writes_the_slim_copy(tmp_path, cache):
+    import signal
+    import time
+
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "lirm.engine.cli", "train", "--preset", "tiny", "--stage-steps", "40", "--scene-pool", "1",
+           "--cache", str(cache), "--out", str(out), "--checkpoint-every", "1000", "--device", "cpu",
+           "--slim-copy", str(tmp_path / "slim.safetensors")]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 300
+        while not (out / "metrics.csv").is_file() or len(_csv(out / "metrics.csv")) < 1:
+            assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()[-3000:] if proc.poll() is not None else "no step"
+            time.sleep(0.2)
+        proc.send_signal(signal.SIGINT)
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGINT)  # the second stops the step where it is
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130 and "cancelled" in stderr, stderr[-3000:]
+    _, extra = peek_checkpoint(tmp_path / "slim.safetensors")
+    done = len(_csv(out / "metrics.csv"))
+    assert extra["training"]["step"] == done and done < 40
