@@ -32,6 +32,22 @@ class UVMesh:
     faces: np.ndarray  # (F, 3) uint32, counter-clockwise from outside
 
 
+def usable_vertex_normals(mesh: trimesh.Trimesh) -> np.ndarray:
+    """trimesh's area-weighted vertex normals, with a unit normal wherever they are not one: a vertex
+    whose faces all have zero area (marching cubes and decimation leave a few) gets a zero normal,
+    which the renderer's G-buffer turns into NaN. Those take the direction from the mesh's centre,
+    the outward normal of the closed, roughly star-shaped surfaces that reconstructions are."""
+    normals = np.asarray(mesh.vertex_normals, np.float64).copy()
+    length = np.linalg.norm(normals, axis=1)
+    bad = ~np.isfinite(length) | (np.abs(length - 1.0) > 1e-3)
+    if bad.any():
+        vertices = np.asarray(mesh.vertices, np.float64)
+        radial = vertices[bad] - vertices.mean(axis=0)
+        r = np.linalg.norm(radial, axis=1, keepdims=True)
+        normals[bad] = np.where(r > 1e-12, radial / np.maximum(r, 1e-12), np.array([0.0, 0.0, 1.0]))
+    return normals.astype(np.float32)
+
+
 def unwrap(mesh: trimesh.Trimesh, config: AtlasConfig = AtlasConfig()) -> UVMesh:
     if len(mesh.faces) == 0:
         raise LirmUserError("the mesh has no faces to unwrap; the surface extraction found nothing")
@@ -40,7 +56,7 @@ def unwrap(mesh: trimesh.Trimesh, config: AtlasConfig = AtlasConfig()) -> UVMesh
         raise LirmUserError("the mesh is degenerate (no area or non-finite vertices); xatlas cannot unwrap it. "
                             "Extract the surface again at a higher grid resolution")
     atlas = xatlas.Atlas()
-    normals = np.asarray(mesh.vertex_normals, np.float32)
+    normals = usable_vertex_normals(mesh)
     atlas.add_mesh(np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.uint32), normals)
     pack = xatlas.PackOptions()
     pack.resolution = config.texture_size
