@@ -4,8 +4,8 @@
 # Prepare here once: ../shared/tools/gpu-machine-prep.sh (wheels in .whl/, GL loaders in .gl/); then call
 # the device tool with carry [".whl", ".gl"] and the command `bash engine/train/gpu_slice.sh SECONDS`,
 # where SECONDS is the wall time this script may use (it must end inside the call's limit).
-# It installs the project, checks EGL, times the update loop (paper at 512 and 256 px, small; bf16),
-# measures the data generator, then trains `small` stage 1 until its deadline, resuming from
+# It installs the project, checks EGL, with TIMINGS=1 times the update loop (paper at 512 and 256 px,
+# small; bf16), measures the data generator, then trains `small` stage 1 until its deadline, resuming from
 # resources/checkpoints/lirm-small-resume.safetensors when that exists. What comes back in $OUT:
 # the float16 resume copy split in 15 MiB parts (slim.part*; `cat slim.part* > F` joins them) and
 # logs.tar.gz (metrics.csv, eval.csv, run json, loss curves, timings, the log).
@@ -33,10 +33,13 @@ lirm="python3 -m lirm.engine.cli"
 python3 -c "import moderngl; c = moderngl.create_standalone_context(backend='egl'); print('EGL:', c.info['GL_RENDERER'])" || exit 1
 echo "[$(left) s left] installed"
 
-# Update-loop timings (bf16 autocast on CUDA), each bounded so a hang cannot eat the slice.
-timeout ${T_BENCH:-60} $lirm bench model --preset paper --device $device --updates 4 --no-baseline --json /tmp/slice/bench_paper512.json
-timeout ${T_BENCH:-45} $lirm bench model --preset paper --device $device --updates 4 --no-baseline --image-size 256 --json /tmp/slice/bench_paper256.json
-timeout ${T_BENCH:-45} $lirm bench model --preset small --device $device --updates 4 --no-baseline --json /tmp/slice/bench_small.json
+# Update-loop timings (bf16 autocast on CUDA), each bounded so a hang cannot eat the slice; measured in
+# the first slice (README, "The model"), so only with TIMINGS=1 (80 s of the slice).
+if [ "${TIMINGS:-0}" = 1 ]; then
+  timeout ${T_BENCH:-60} $lirm bench model --preset paper --device $device --updates 4 --no-baseline --json /tmp/slice/bench_paper512.json
+  timeout ${T_BENCH:-45} $lirm bench model --preset paper --device $device --updates 4 --no-baseline --image-size 256 --json /tmp/slice/bench_paper256.json
+  timeout ${T_BENCH:-45} $lirm bench model --preset small --device $device --updates 4 --no-baseline --json /tmp/slice/bench_small.json
+fi
 # One process's synthetic-scene rate on this machine's EGL (the training runs many such processes).
 timeout ${T_BENCH:-45} $lirm bench synth --scenes 6 --views 8 --size 256
 echo "[$(left) s left] timings done"
