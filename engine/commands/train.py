@@ -22,6 +22,8 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--models", type=Path, help="also train on the glTF/glb models under this folder")
     parser.add_argument("--environments", type=Path, help="also light scenes with the .hdr/.exr files under this folder")
     parser.add_argument("--no-builtin-objects", action="store_true", help="only the --models folder's objects")
+    parser.add_argument("--scene-views", type=int, help="views rendered per training scene (default the generator's 32); "
+                        "fewer make data faster where it bounds the step, and must hold every update set's inputs")
     parser.add_argument("--scene-pool", type=int, default=0, help="draw scenes from this many seeds (0: a new scene every time)")
     parser.add_argument("--cache", type=Path, help="keep rendered scenes in this folder (useful with --scene-pool)")
     parser.add_argument("--data-seed", type=int, default=0, help="seed of the scenes and of every random choice of the data")
@@ -46,6 +48,17 @@ def run(args: argparse.Namespace) -> int:
     require_at_least_one(args, "max_steps", "stage_steps", "checkpoint_every")
     rank0 = os.environ.get("RANK", "0") == "0"
     scenes = _scene_config(args, scene_config_for(model_preset(args.preset).image_size), rank0)
+    if args.scene_views is not None:
+        from dataclasses import replace
+
+        from ..train.stages import stage_config
+
+        stage_needs = stage_config(args.preset, args.stage)
+        needed = stage_needs.update_sets * stage_needs.views_per_set[1]
+        if args.scene_views < needed:
+            raise LirmUsageError(f"--scene-views {args.scene_views}: stage {args.stage} feeds {stage_needs.update_sets} update sets "
+                                 f"of up to {stage_needs.views_per_set[1]} views, so each scene needs at least {needed}")
+        scenes = replace(scenes, views=args.scene_views)
     config = TrainConfig(preset=args.preset, stage=args.stage, out_dir=str(args.out), max_steps=args.max_steps,
                          stage_steps=args.stage_steps, resume=str(args.resume) if args.resume else None,
                          data_seed=args.data_seed, scene_pool=args.scene_pool,

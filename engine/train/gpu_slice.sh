@@ -45,10 +45,12 @@ timeout ${T_BENCH:-45} $lirm bench synth --scenes 6 --views 8 --size 256
 echo "[$(left) s left] timings done"
 
 resume=()
+views=()  # SCENE_VIEWS=N: fewer views rendered per scene (at least 12 in stage 1) where the data bounds the step
+[ -n "${SCENE_VIEWS:-}" ] && views=(--scene-views "$SCENE_VIEWS")
 [ -f resources/checkpoints/lirm-small-resume.safetensors ] && resume=(--resume resources/checkpoints/lirm-small-resume.safetensors)
 $lirm train --preset "${PRESET:-small}" --stage 1 --stage-steps "${STAGE_STEPS:-3000}" --batch-scenes "${BATCH_SCENES:-16}" \
   --workers "${WORKERS:-14}" --device $device --out /tmp/slice/run --checkpoint-every "${CHECKPOINT_EVERY:-100}" \
-  --eval-every "${EVAL_EVERY:-100}" --eval-objects 2 --slim-copy /tmp/slice/slim.safetensors "${resume[@]}" &
+  --eval-every "${EVAL_EVERY:-100}" --eval-objects 2 --slim-copy /tmp/slice/slim.safetensors "${resume[@]}" "${views[@]}" &
 pid=$!
 # The deadline is kept whatever the trainer is doing: a first SIGINT (to the trainer alone) stops at
 # the end of its step with a checkpoint; a second, 25 s later, interrupts a step still waiting for its

@@ -4,6 +4,7 @@ train together, and bad input stops before compute is spent."""
 from __future__ import annotations
 
 import csv
+import json
 import os
 import socket
 import subprocess
@@ -186,3 +187,16 @@ def test_a_second_ctrl_c_stops_at_once_and_still_writes_the_slim_copy(tmp_path, 
     _, extra = peek_checkpoint(tmp_path / "slim.safetensors")
     done = len(_csv(out / "metrics.csv"))
     assert extra["training"]["step"] == done and done < 40
+
+
+def test_scene_views_sets_the_views_per_scene_and_must_hold_the_update_sets(tmp_path):
+    base = [sys.executable, "-m", "lirm.engine.cli", "train", "--preset", "tiny", "--max-steps", "1", "--stage-steps", "40",
+            "--scene-pool", "1", "--cache", str(tmp_path / "cache"), "--device", "cpu"]
+    done = subprocess.run(base + ["--out", str(tmp_path / "few"), "--scene-views", "11"], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 2 and "each scene needs at least 12" in done.stderr, done.stderr[-2000:]
+    assert not (tmp_path / "few").exists()
+    done = subprocess.run(base + ["--out", str(tmp_path / "run"), "--scene-views", "12"], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    run = json.loads((tmp_path / "run" / "stage1_run.json").read_text())
+    assert run["config"]["scenes"]["views"] == 12
+    assert len(_csv(tmp_path / "run" / "metrics.csv")) == 1
