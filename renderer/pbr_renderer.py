@@ -265,26 +265,8 @@ class _GBuffer:
 
     def read(self) -> RenderOutput:
         w, h = self.size
-
-        def rgba(i: int) -> np.ndarray:
-            data = np.frombuffer(self.fbo.read(components=4, attachment=i, dtype="f4"), dtype=np.float32)
-            return data.reshape(h, w, 4)[::-1]  # GL rows start at the bottom
-
-        radiance, albedo, material, normal_depth, uv = (rgba(i) for i in range(len(GBUFFER_ATTACHMENTS)))
         display = np.frombuffer(self.display_fbo.read(components=4, dtype="f1"), dtype=np.uint8).reshape(h, w, 4)[::-1]
-        mask = albedo[:, :, 3].copy()
-        return RenderOutput(
-            beauty=display[:, :, :3].astype(np.float32) / 255.0,
-            radiance=radiance[:, :, :3].copy(),
-            albedo=albedo[:, :, :3].copy(),
-            roughness=material[:, :, 0].copy(),
-            metallic=material[:, :, 1].copy(),
-            occlusion=material[:, :, 2].copy(),
-            normal=normal_depth[:, :, :3].copy(),
-            depth=normal_depth[:, :, 3].copy(),
-            mask=mask,
-            uv=uv[:, :, :2].copy(),
-        )
+        return _read_gbuffer(self.fbo, self.size, display[:, :, :3].astype(np.float32) / 255.0)
 
     def release(self) -> None:
         for obj in (self.fbo, self.display_fbo, self.depth, self.display, *self.textures):
@@ -302,22 +284,36 @@ class _ResolvedBuffer:
 
     def read(self) -> RenderOutput:
         w, h = self.size
-
-        def rgba(i: int) -> np.ndarray:
-            data = np.frombuffer(self.fbo.read(components=4, attachment=i, dtype="f4"), dtype=np.float32)
-            return data.reshape(h, w, 4)[::-1]  # GL rows start at the bottom
-
-        radiance, albedo, material, normal_depth, uv, beauty = (rgba(i) for i in range(len(self.textures)))
-        return RenderOutput(
-            beauty=beauty[:, :, :3].copy(), radiance=radiance[:, :, :3].copy(), albedo=albedo[:, :, :3].copy(),
-            roughness=material[:, :, 0].copy(), metallic=material[:, :, 1].copy(), occlusion=material[:, :, 2].copy(),
-            normal=normal_depth[:, :, :3].copy(), depth=normal_depth[:, :, 3].copy(), mask=albedo[:, :, 3].copy(),
-            uv=uv[:, :, :2].copy(),
-        )
+        beauty = _read_attachment(self.fbo, len(GBUFFER_ATTACHMENTS), w, h)
+        return _read_gbuffer(self.fbo, self.size, beauty[:, :, :3].copy())
 
     def release(self) -> None:
         for obj in (self.fbo, *self.textures):
             obj.release()
+
+
+def _read_attachment(fbo: moderngl.Framebuffer, index: int, w: int, h: int) -> np.ndarray:
+    data = np.frombuffer(fbo.read(components=4, attachment=index, dtype="f4"), dtype=np.float32)
+    return data.reshape(h, w, 4)[::-1]  # GL rows start at the bottom
+
+
+def _read_gbuffer(fbo: moderngl.Framebuffer, size: tuple[int, int], beauty: np.ndarray) -> RenderOutput:
+    """The G-buffer attachments (GBUFFER_ATTACHMENTS' order, albedo's alpha = coverage) of `fbo` as a
+    RenderOutput with the given display image."""
+    w, h = size
+    radiance, albedo, material, normal_depth, uv = (_read_attachment(fbo, i, w, h) for i in range(len(GBUFFER_ATTACHMENTS)))
+    return RenderOutput(
+        beauty=beauty,
+        radiance=radiance[:, :, :3].copy(),
+        albedo=albedo[:, :, :3].copy(),
+        roughness=material[:, :, 0].copy(),
+        metallic=material[:, :, 1].copy(),
+        occlusion=material[:, :, 2].copy(),
+        normal=normal_depth[:, :, :3].copy(),
+        depth=normal_depth[:, :, 3].copy(),
+        mask=albedo[:, :, 3].copy(),
+        uv=uv[:, :, :2].copy(),
+    )
 
 
 def _scaled_camera(camera, k: int):
