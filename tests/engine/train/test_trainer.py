@@ -170,7 +170,9 @@ def test_a_second_ctrl_c_stops_at_once_and_still_writes_the_slim_copy(tmp_path, 
     out = tmp_path / "run"
     cmd = [sys.executable, "-m", "lirm.engine.cli", "train", "--preset", "tiny", "--stage-steps", "40", "--scene-pool", "1",
            "--cache", str(cache), "--out", str(out), "--checkpoint-every", "1000", "--device", "cpu",
-           "--slim-copy", str(tmp_path / "slim.safetensors")]
+           "--batch-scenes", "8", "--slim-copy", str(tmp_path / "slim.safetensors")]
+    # Eight scenes a step keep a step long (seconds) next to the 0.1 s between the two signals: with one
+    # scene a step could end between them, and the first request alone would stop the run cleanly.
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 300
@@ -178,7 +180,7 @@ def test_a_second_ctrl_c_stops_at_once_and_still_writes_the_slim_copy(tmp_path, 
             assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()[-3000:] if proc.poll() is not None else "no step"
             time.sleep(0.2)
         proc.send_signal(signal.SIGINT)
-        time.sleep(0.5)
+        time.sleep(0.1)
         proc.send_signal(signal.SIGINT)  # the second stops the step where it is
         _, stderr = proc.communicate(timeout=120)
     finally:
