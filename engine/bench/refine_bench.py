@@ -38,22 +38,15 @@ def apply_options(config: RefineConfig, options: list[str]) -> RefineConfig:
             value = ast.literal_eval(text)
         except (ValueError, SyntaxError):
             raise LirmUserError(f"--option {option!r}: {text!r} is not a number or tuple") from None
-        if key.startswith("material_search."):
-            name = key[len("material_search."):]
-            settings = config.material_search
-            if name not in {f.name for f in fields(settings)}:
-                raise LirmUserError(f"--option {option!r}: no search setting {name!r}; settings: "
-                                    f"{', '.join(f.name for f in fields(settings))}")
-            config = replace(config, material_search=replace(settings, **{name: tuple(value) if isinstance(value, list) else value}))
-        elif key.startswith("losses."):
+        if key.startswith("losses."):
             name = key[len("losses."):]
             if name not in {f.name for f in fields(LossWeights)}:
                 raise LirmUserError(f"--option {option!r}: no loss term {name!r}; terms: {', '.join(f.name for f in fields(LossWeights))}")
             config = replace(config, losses=replace(config.losses, **{name: float(value)}))
         else:
-            if key not in {f.name for f in fields(RefineConfig)} or key in ("losses", "material_search"):
+            if key not in {f.name for f in fields(RefineConfig)} or key == "losses":
                 raise LirmUserError(f"--option {option!r}: no setting {key!r}; settings: "
-                                    f"{', '.join(f.name for f in fields(RefineConfig) if f.name not in ('losses', 'material_search'))}")
+                                    f"{', '.join(f.name for f in fields(RefineConfig) if f.name != 'losses')}")
             if isinstance(value, list):
                 value = tuple(value)
             if key == "plane_resolutions" and isinstance(value, int):

@@ -55,7 +55,6 @@ class RefinedObject:
     steps: int
     views: RefineViews  # the input views it was fitted to
     lighting: object | None  # the lighting fitted with the materials (None without them)
-    material_search: dict | None = None  # the search's outcome (RefineResult.material_search)
 
 
 def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig, init: str, true_lighting=None) -> RefinedObject:
@@ -80,8 +79,7 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
         lighting = (oracle_lighting(obj, true_lighting) if true_lighting is not None
                     else input_lighting(obj, [i for s in sets for i in s], refine))
     result = refine_field(refinable, views, refine, grid, lighting=lighting, start_has_materials=init == "lirm")
-    return RefinedObject(result.field.frozen_field(), time.perf_counter() - start, result.steps, views, result.lighting,
-                         result.material_search)
+    return RefinedObject(result.field.frozen_field(), time.perf_counter() - start, result.steps, views, result.lighting)
 
 
 def input_lighting(obj: HeldoutObject, indices: list[int], refine: RefineConfig):
@@ -156,8 +154,7 @@ def per_object_scores(model, objects: list[HeldoutObject], config: EvalConfig, r
         keys = ("psnr", "ssim", "albedo_psnr", "roughness_psnr", "metallic_psnr", "chamfer") + (
             RELIGHT_KEYS if relighter is not None else ())
         baked = {k: float(np.mean(v)) for k, v in scores.items() if k.startswith(("baked_", "plain_"))}  # RelightConfig.also_*
-        rows.append({"object": obj.name, "seconds": refined.seconds, "steps": refined.steps, **{k: row[k] for k in keys}, **baked,
-                     **({"material_search": refined.material_search} if refined.material_search else {})})
+        rows.append({"object": obj.name, "seconds": refined.seconds, "steps": refined.steps, **{k: row[k] for k in keys}, **baked})
     return rows
 
 

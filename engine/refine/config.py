@@ -58,21 +58,6 @@ class LossWeights:
 
 
 @dataclass(frozen=True)
-class MaterialSearchSettings:
-    """The search over material hypotheses (material_search.py)."""
-
-    roughness: tuple[float, ...] = (0.08, 0.15, 0.25, 0.4, 0.6, 0.85)  # roughness levels tried, each as paint and as metal
-    cell: float = 0.04  # of the bounding radius: the side of a surface cell (about two pixels at 128 px)
-    margin: float = 0.1  # the field's own pair is kept unless another's neighbourhood error is this share lower
-    min_pixels: int = 24  # a neighbourhood with fewer photo pixels keeps the field's pair
-    max_pixels: int = 120_000  # at most this many object pixels are rendered (a seeded subset beyond it)
-    chunk: int = 4096  # rays rendered at once
-    # The material prior's weight once the fit is anchored to the choice (None: losses.material_prior,
-    # as before the search).
-    prior_weight: float | None = None
-
-
-@dataclass(frozen=True)
 class RefineConfig:
     minutes: float | None = 3.0  # wall-clock budget of the fit (None: only `iterations` bounds it)
     iterations: int = 100_000  # at most this many optimiser steps
@@ -120,12 +105,6 @@ class RefineConfig:
     # The material prior holds roughness and metallic to the starting field's where that is a
     # prediction (LIRM, an earlier refinement) rather than to 0.5 and 0 (README: what it was worth).
     anchor_materials: bool = True
-    # With the inverse rendering, at this share of the budget each surface cell's roughness and
-    # metallic are chosen among hypotheses by the photometric error they leave over every view
-    # (material_search.py), and the material prior holds the field to the choice from then on
-    # (None: no search; README: what it was worth).
-    material_search_at: float | None = None
-    material_search: MaterialSearchSettings = field(default_factory=MaterialSearchSettings)
     losses: LossWeights = field(default_factory=LossWeights)
 
     def __post_init__(self) -> None:
@@ -137,8 +116,6 @@ class RefineConfig:
             raise ValueError(f"rays per step must be at least 16, got {self.rays_per_step}")
         if not self.plane_resolutions or min(self.plane_resolutions) < 8 or max(self.plane_resolutions) > 1024:
             raise ValueError(f"plane resolutions must lie in 8..1024, got {self.plane_resolutions}")
-        if self.material_search_at is not None and not 0.0 <= self.material_search_at < 1.0:
-            raise ValueError(f"material_search_at is a share of the budget in [0, 1), got {self.material_search_at}")
         if self.shading_normal not in ("head", "sdf", "sdf-fixed"):
             raise ValueError(f"the shading normal is 'head', 'sdf' or 'sdf-fixed', got {self.shading_normal!r}")
 

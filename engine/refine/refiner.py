@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Callable
 
 import torch
@@ -20,7 +20,6 @@ import torch
 from lirm.engine.model.occupancy_grid import OccupancyGrid
 
 from .config import RefineConfig
-from .material_search import search_materials
 from .objective import batch_loss
 from .ray_rendering import render_ray_batch, with_sdf_normals
 from .refinable_field import RefinableField
@@ -52,9 +51,6 @@ class RefineResult:
     stopped: str  # "budget", "iterations" or "cancelled"
     history: list[dict] = field(default_factory=list)  # every `best_every` steps: step, seconds, loss, terms
     lighting: object | None = None  # the fitted PanoramaLighting (inverse rendering), at the best state
-    # The material search's outcome (config.material_search_at): step, seconds it took, shares of the
-    # surface cells kept / made paint / made metal; None when no search ran.
-    material_search: dict | None = None
 
 
 def _optimiser(refinable: RefinableField, config: RefineConfig, lighting=None) -> torch.optim.Optimizer:
@@ -123,8 +119,6 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
     best = (math.inf, 0, refinable.snapshot())
     best_lighting = None if lighting is None else {k: v.detach().clone() for k, v in lighting.state_dict().items()}
     history: list[dict] = []
-    losses = config.losses
-    searched: dict | None = None
     start = time.perf_counter()
     step, stopped = 0, "iterations"
     last_live = start
@@ -152,15 +146,6 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
                 group["lr"] = group["base_lr"] * decay
 
             shading = lighting if lighting is not None and fraction >= config.pbr_start else None
-            if shading is not None and searched is None and config.material_search_at is not None \
-                    and fraction >= config.material_search_at:
-                began = time.perf_counter()
-                choice = search_materials(refinable.field(), views, grid, lighting, 1.0 / inv_beta, config.coarse_samples,
-                                          config.fine_samples, config.material_search, generator, device)
-                anchor = choice.anchor(anchor)
-                if config.material_search.prior_weight is not None:
-                    losses = replace(losses, material_prior=config.material_search.prior_weight)
-                searched = {"step": step, "seconds": round(time.perf_counter() - began, 2), **choice.shares}
             pairs = None
             if shading is not None and config.losses.albedo_pairs:
                 # A share of the batch comes as neighbours of the rest (same number of rays in all).
@@ -184,7 +169,7 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
                 floor.observe(origins, directions, render.depth, render.opacity.detach(), alphas,
                               views.pixel_angles[index].to(device), 1.0 / inv_beta)
             carve = floor is not None and fraction >= config.floor_start
-            loss, terms = batch_loss(field_, render, colours, alphas, losses, config.eikonal_points, generator,
+            loss, terms = batch_loss(field_, render, colours, alphas, config.losses, config.eikonal_points, generator,
                                      shading, directions, anchor,
                                      _volume_points(grid, config, generator, device) if config.losses.volume else None,
                                      floor, floor.points_below(config.eikonal_points, generator, device) if carve else None,
@@ -232,4 +217,4 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
         refinable.load_snapshot(snapshot)
         if lighting is not None and best_lighting is not None:
             lighting.load_state_dict(best_lighting)
-    return RefineResult(refinable, step, seconds, best_step, best_loss, stopped, history, lighting, searched)
+    return RefineResult(refinable, step, seconds, best_step, best_loss, stopped, history, lighting)
