@@ -281,6 +281,7 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
     step = start_step
     checkpoint = None
     stopped_early = False
+    slim_step = None  # the step of the slim copy last written
     try:
         data_start = time.perf_counter()
         for sample in loader:
@@ -329,6 +330,7 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
                 checkpoint = _save(out_dir, model, optimizer, config.stage, done, run, info)
                 if info.is_main and config.slim_copy:  # kept current too: a killed run still leaves one to resume from
                     save_slim_checkpoint(Path(config.slim_copy), model, config.stage, done, run)
+                    slim_step = done
             if evaluator is not None and (done % config.eval_every == 0 or done == end_step):
                 evaluator.run(model, done, writer)
                 model.train()
@@ -344,7 +346,8 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
         if writer is not None:
             writer.close()
         if info.is_main and config.slim_copy and history:
-            save_slim_checkpoint(Path(config.slim_copy), model, config.stage, history[-1]["step"], run)
+            if history[-1]["step"] != slim_step:  # a run ending on a checkpoint wrote it there already
+                save_slim_checkpoint(Path(config.slim_copy), model, config.stage, history[-1]["step"], run)
             log.info("slim checkpoint (float16, no moments) of step %d written to %s", history[-1]["step"], config.slim_copy)
         if info.is_main and (out_dir / "metrics.csv").is_file():
             from .loss_curve import write_loss_curves

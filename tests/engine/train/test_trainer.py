@@ -72,14 +72,21 @@ def test_resume_continues_the_exact_loss_curve(tmp_path, cache):
     assert [int(r["step"]) for r in _csv(tmp_path / "split" / "metrics.csv")] == [1, 2, 3, 4, 5, 6]
 
 
-def test_a_slim_copy_resumes_at_its_step_with_fresh_moments_and_a_warm_up(tmp_path, cache):
+def test_a_slim_copy_resumes_at_its_step_with_fresh_moments_and_a_warm_up(tmp_path, cache, monkeypatch):
     """The float16 copy carried between GPU slices: a third of the size, continues the same step
-    (same data, same schedule) and ramps the learning rate up again because AdamW starts afresh."""
+    (same data, same schedule) and ramps the learning rate up again because AdamW starts afresh.
+    A run whose last step is a checkpoint writes it once, not again on the way out."""
+    from lirm.engine.train import trainer
     from lirm.engine.train.trainer import MOMENT_RESTART_STEPS, learning_rate
 
+    written = []
+    real_save = trainer.save_slim_checkpoint
+    monkeypatch.setattr(trainer, "save_slim_checkpoint", lambda path, model, stage, step, run: (
+        written.append(step), real_save(path, model, stage, step, run)))
     slim = tmp_path / "slim.safetensors"
     first = run_training(_config(tmp_path / "run", cache, max_steps=2, checkpoint_every=2, slim_copy=str(slim),
                                  batch_scenes=1))
+    assert written == [2], written
     assert slim.stat().st_size < 0.4 * first.checkpoint.stat().st_size
     model, extra = load_checkpoint(slim)
     assert extra["training"]["step"] == 2 and extra["training"]["moments"] == "dropped"
