@@ -32,7 +32,7 @@ from typing import Callable
 import torch
 from torch.utils.data import DataLoader, IterableDataset, get_worker_info
 
-from lirm.engine.errors import LirmUserError
+from lirm.engine.errors import LirmUsageError, LirmUserError
 from lirm.engine.io.atomic_files import atomic_write, atomic_write_json
 from lirm.engine.model.config import preset as model_preset
 from lirm.engine.model.lirm import LIRM
@@ -223,8 +223,20 @@ def _prepare_model(config: TrainConfig, stage: StageConfig, info: ProcessGroupIn
     return model.train(), 0, {}, False
 
 
+def _check_scene_views(scenes: TrainingSceneConfig | None, stage: StageConfig, stage_number: int) -> None:
+    """Every update set of a step draws its own views of the scene, so a scene must hold them all;
+    checked before anything is created or computed."""
+    if scenes is None:
+        return
+    needed = stage.update_sets * stage.views_per_set[1]
+    if scenes.views < needed:
+        raise LirmUsageError(f"--scene-views {scenes.views}: stage {stage_number} feeds {stage.update_sets} update sets "
+                             f"of up to {stage.views_per_set[1]} views, so each scene needs at least {needed}")
+
+
 def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> TrainResult:
     stage = config.stage_settings()
+    _check_scene_views(config.scenes, stage, config.stage)
     out_dir = Path(config.out_dir)
     model, start_step, optimizer_state, moments_dropped = _prepare_model(config, stage, info)
     end_step = min(stage.steps, config.max_steps) if config.max_steps else stage.steps

@@ -198,6 +198,16 @@ def test_a_second_ctrl_c_stops_at_once_and_still_writes_the_slim_copy(tmp_path, 
     assert extra["training"]["step"] == done and done < 40
 
 
+def test_the_trainer_itself_refuses_scenes_too_small_for_the_update_sets(tmp_path, cache):
+    from dataclasses import replace
+
+    from lirm.engine.errors import LirmUsageError
+
+    with pytest.raises(LirmUsageError, match="each scene needs at least 12"):
+        run_training(_config(tmp_path / "few", cache, max_steps=1, scenes=replace(SCENES, views=11)))
+    assert not (tmp_path / "few").exists()
+
+
 def test_scene_views_sets_the_views_per_scene_and_must_hold_the_update_sets(tmp_path):
     base = [sys.executable, "-m", "lirm.engine.cli", "train", "--preset", "tiny", "--max-steps", "1", "--stage-steps", "40",
             "--scene-pool", "1", "--cache", str(tmp_path / "cache"), "--device", "cpu"]
