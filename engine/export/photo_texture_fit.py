@@ -61,6 +61,10 @@ class TextureFitConfig:
     # 128 px give 62k-131k, the demo's 16 photos 463k). On the demo mug 150k left visibly noisier
     # texels than 300k (fewer pixels per texel), for 20 s of fitting against 33 s.
     max_pixels: int = 300_000
+    # Sub-samples per side of each photo pixel: the pixel is shaded at k x k points of its footprint
+    # and their mean (in linear light, as a sensor integrates) is held to the photo. With 1, a pixel
+    # is one point, and at about 3 texels per photo pixel most texels are pulled by one pixel or none.
+    footprint: int = 1
     seed: int = 0
     dilation: int = 16  # as the bake: texels grown into the gutters
     # Each texel's material chosen among three fits before the joint one (metal_search.py): the field's
@@ -76,6 +80,8 @@ class TextureFitConfig:
             raise ValueError(f"steps must be >= 0, got {self.steps}")
         if not self.learning_rate > 0:
             raise ValueError(f"learning_rate must be positive, got {self.learning_rate}")
+        if self.footprint < 1:
+            raise ValueError(f"footprint must be >= 1 sub-sample per side, got {self.footprint}")
         if self.search_steps < 1 or self.search_final_steps < 0:
             raise ValueError(f"the metal search needs search_steps >= 1 and search_final_steps >= 0, "
                              f"got {self.search_steps} and {self.search_final_steps}")
@@ -113,20 +119,32 @@ class TextureFitReport:
 
 @dataclass
 class PixelSamples:
-    """The photo pixels that see the mesh: where they land in the atlas and how they are shaded."""
+    """The photo pixels that see the mesh: where they land in the atlas and how they are shaded. Each
+    of the N pixels has `footprint` sub-samples (consecutive rows of uv, normal and view)."""
 
-    uv: torch.Tensor  # (N, 2) glTF texture coordinates
-    normal: torch.Tensor  # (N, 3) world shading normal (after the normal map), as the renderer shades
-    view: torch.Tensor  # (N, 3) unit surface-to-eye direction
+    uv: torch.Tensor  # (N * footprint, 2) glTF texture coordinates
+    normal: torch.Tensor  # (N * footprint, 3) world shading normal (after the normal map), as the renderer shades
+    view: torch.Tensor  # (N * footprint, 3) unit surface-to-eye direction
     colour: torch.Tensor  # (N, 3) the photo's display sRGB
+    footprint: int = 1  # sub-samples per pixel (k x k for a footprint of k per side)
+
+    @property
+    def pixels(self) -> int:
+        return int(self.colour.shape[0])
+
+    @property
+    def pixel_uv(self) -> torch.Tensor:
+        """(N, 2): each pixel's first sub-sample's coordinates (a mean could fall between charts)."""
+        return self.uv[:: self.footprint]
 
     def subset(self, count: int, seed: int = 0) -> "PixelSamples":
         """At most `count` of the pixels, drawn at random (the same ones for the same seed)."""
-        total = int(self.uv.shape[0])
+        total = self.pixels
         if total <= count:
             return self
         keep = torch.randperm(total, generator=torch.Generator().manual_seed(seed))[:count]
-        return PixelSamples(self.uv[keep], self.normal[keep], self.view[keep], self.colour[keep])
+        rows = (keep[:, None] * self.footprint + torch.arange(self.footprint)).reshape(-1)
+        return PixelSamples(self.uv[rows], self.normal[rows], self.view[rows], self.colour[keep], self.footprint)
 
 
 def mesh_for_rendering(uv_mesh: UVMesh, textures: BakedTextures):
@@ -140,9 +158,10 @@ def mesh_for_rendering(uv_mesh: UVMesh, textures: BakedTextures):
                     material=material, name="export")
 
 
-def sample_photo_pixels(mesh, photos: PhotoViews, context, min_photo_alpha: float = 0.99) -> PixelSamples:
+def sample_photo_pixels(mesh, photos: PhotoViews, context, min_photo_alpha: float = 0.99, footprint: int = 1) -> PixelSamples:
     """Rasterise `mesh` (MeshData) from every photo's camera and keep the pixels that both the render
-    (fully covered, not an edge, a finite normal) and the photo's mask call object."""
+    (fully covered, not an edge, a finite normal, in every sub-sample) and the photo's mask call
+    object; with `footprint` k, each pixel at k x k sub-samples (the camera scaled by k)."""
     from lirm.renderer.environment import Environment
     from lirm.renderer.pbr_renderer import PBRRenderer, RenderSettings
 
@@ -152,19 +171,25 @@ def sample_photo_pixels(mesh, photos: PhotoViews, context, min_photo_alpha: floa
     lighting = renderer.prepare_lighting(Environment(np.full((8, 16, 3), 0.5, np.float32), "grey"))
     uv, normal, view, colour = [], [], [], []
     try:
+        k = footprint
         for camera, image, mask in zip(photos.cameras, photos.images, photos.masks):
-            out = renderer.render_view(scene, camera, lighting, RenderSettings(show_environment=False, supersample=1))
-            if out.mask.shape != mask.shape:
+            if (int(camera.height), int(camera.width)) != np.asarray(mask).shape[:2]:
                 raise ValueError(f"a photo of {mask.shape[1]}x{mask.shape[0]} px has a camera of "
-                                 f"{out.mask.shape[1]}x{out.mask.shape[0]} px")
+                                 f"{int(camera.width)}x{int(camera.height)} px")
+            fine = camera.scaled(k) if k > 1 else camera
+            out = renderer.render_view(scene, fine, lighting, RenderSettings(show_environment=False, supersample=1))
+            _, directions = fine.pixel_rays()
+            # (kH, kW, C) -> (H, W, k*k, C): each photo pixel's sub-samples together
+            group = lambda a: a.reshape(a.shape[0] // k, k, a.shape[1] // k, k, -1).transpose(0, 2, 1, 3, 4).reshape(  # noqa: E731
+                a.shape[0] // k, a.shape[1] // k, k * k, -1)
             # A pixel whose G-buffer is not finite (a zero vertex normal normalised to NaN) cannot be
             # shaded, and one NaN reaching the BRDF table's lookup would end the whole fit.
-            finite = np.isfinite(out.normal).all(-1) & np.isfinite(out.uv).all(-1)
-            use = (out.mask > 0.999) & (np.asarray(mask) >= min_photo_alpha) & finite
-            _, directions = camera.pixel_rays()
-            uv.append(out.uv[use])
-            normal.append(out.normal[use])
-            view.append(-directions[use])
+            finite = (np.isfinite(group(out.normal)).all(-1) & np.isfinite(group(out.uv)).all(-1)).all(-1)
+            covered = (group(out.mask[..., None])[..., 0] > 0.999).all(-1)
+            use = covered & (np.asarray(mask) >= min_photo_alpha) & finite
+            uv.append(group(out.uv)[use].reshape(-1, 2))
+            normal.append(group(out.normal)[use].reshape(-1, 3))
+            view.append(-group(directions)[use].reshape(-1, 3))
             colour.append(np.asarray(image)[use])
     finally:
         scene.release()
@@ -174,7 +199,7 @@ def sample_photo_pixels(mesh, photos: PhotoViews, context, min_photo_alpha: floa
         np.concatenate(parts).astype(np.float32) if parts else np.zeros((0, width), np.float32))
     n = as_tensor(normal, 3)
     n = n / n.norm(dim=-1, keepdim=True).clamp(min=1e-12)
-    return PixelSamples(as_tensor(uv, 2), n, as_tensor(view, 3), as_tensor(colour, 3))
+    return PixelSamples(as_tensor(uv, 2), n, as_tensor(view, 3), as_tensor(colour, 3), footprint * footprint)
 
 
 METAL_HELD = (0.02, 0.98)  # the metallic the dielectric and metal hypotheses are held at (logits stay finite)
@@ -206,6 +231,8 @@ class _Shading:
         grid, samples = self.grid, self.samples
         shaded = shade(self.light, _lookup(torch.sigmoid(albedo_logit), grid), _lookup(torch.sigmoid(roughness_logit), grid)[:, 0],
                        _lookup(torch.sigmoid(metallic_logit), grid)[:, 0], samples.normal, samples.view).radiance
+        if samples.footprint > 1:  # the pixel integrates its footprint in linear light
+            shaded = shaded.reshape(-1, samples.footprint, 3).mean(1)
         predicted = radiance_to_display_torch(shaded)
         difference = predicted - samples.colour
         if self.clipped is not None:  # (the tone curve never reaches 1: a clipped value is compared with the level)
@@ -259,7 +286,7 @@ def fit_textures(textures: BakedTextures, samples: PixelSamples, lighting, confi
     lighting `shade` accepts); the normal map and coverage are kept. With config.metal_search, each
     texel's material is first chosen among three fits (metal_search.py), then fitted jointly."""
     start = time.perf_counter()
-    count = int(samples.uv.shape[0])
+    count = samples.pixels
     if count == 0 or config.steps == 0:
         return textures, TextureFitReport(views, count, 0, time.perf_counter() - start, float("nan"), float("nan"))
     if isinstance(lighting, torch.nn.Module):  # the fit runs on the CPU: a copy there, the caller's stays put
@@ -325,7 +352,7 @@ def _search_metal(shading: _Shading, baked: _Logits, size: int, config: TextureF
         with torch.no_grad():
             e = fits[which]
             errors.append(shading.errors(e.albedo, e.roughness, e.metallic).sum(-1).numpy())
-    choice = choose_hypotheses(errors, shading.samples.uv.numpy(), size, config.metal_search_sigma, config.metal_search_margin)
+    choice = choose_hypotheses(errors, shading.samples.pixel_uv.numpy(), size, config.metal_search_sigma, config.metal_search_margin)
     picked = torch.from_numpy(choice.choice.astype(np.int64))[..., None]
 
     def pick(name: str) -> torch.Tensor:
@@ -340,6 +367,7 @@ def fit_textures_to_photos(uv_mesh: UVMesh, textures: BakedTextures, photos: Pho
                            config: TextureFitConfig = TextureFitConfig(), progress: Progress | None = None,
                            should_stop: Callable[[], bool] | None = None) -> tuple[BakedTextures, TextureFitReport]:
     """Rasterise the export from the photos' cameras (through `context`) and fit its textures to them."""
-    samples = sample_photo_pixels(mesh_for_rendering(uv_mesh, textures), photos, context, config.min_photo_alpha)
+    samples = sample_photo_pixels(mesh_for_rendering(uv_mesh, textures), photos, context, config.min_photo_alpha,
+                                  config.footprint)
     samples = samples.subset(config.max_pixels, config.seed)
     return fit_textures(textures, samples, lighting, config, progress, should_stop, views=len(photos.cameras))

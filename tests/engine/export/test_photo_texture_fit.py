@@ -208,3 +208,65 @@ def test_pixels_whose_normal_is_not_finite_are_left_out_of_the_samples(gl_contex
     kept = sample_photo_pixels(MeshData(positions, faces, normals=broken, uvs=uvs), photos, gl_context)
     assert torch.isfinite(kept.normal).all() and torch.isfinite(kept.uv).all()
     assert 0.3 * len(whole.normal) < len(kept.normal) < 0.7 * len(whole.normal), (len(kept.normal), len(whole.normal))
+
+
+def test_a_pixel_footprint_fit_recovers_detail_finer_than_a_pixel():
+    """Without GL: stripes three texels wide seen by pixels three texels wide at every offset (as
+    views see a surface at sub-pixel shifts), each pixel the mean of its footprint, as a sensor
+    integrates. Shading each pixel at its 3 x 3 sub-samples and averaging recovers the stripes'
+    contrast; one point per pixel (its centre) fits the texels to their neighbourhoods' means and
+    keeps the blur."""
+    g = torch.Generator().manual_seed(2)
+    size, bright, dark = 18, 0.8, 0.15
+    stripes = np.where(np.arange(size) % 6 < 3, bright, dark).astype(np.float32)
+    truth = torch.from_numpy(np.repeat(np.repeat(stripes[None, :, None], size, 0), 3, 2))
+    count = 4000
+    corner = torch.randint(0, size - 2, (count, 2), generator=g).float() / size  # any texel offset
+    grid = torch.stack(torch.meshgrid(torch.arange(3.0), torch.arange(3.0), indexing="ij"), -1).reshape(9, 2)
+    uv = (corner[:, None] + (grid[None] + 0.5) / size).reshape(-1, 2)  # the 9 texel centres inside each pixel
+    normal = torch.nn.functional.normalize(torch.randn(count, 3, generator=g), dim=-1).repeat_interleave(9, 0)
+    view = normal.clone()
+    lighting = PanoramaLighting.from_environment(make_procedural_environment("studio", width=64), height=8)
+    sampled = torch.nn.functional.grid_sample(truth.permute(2, 0, 1)[None], (uv * 2 - 1)[None, None], mode="bilinear",
+                                              padding_mode="border", align_corners=False)[0, :, 0].T
+    with torch.no_grad():
+        radiance = shade(lighting, sampled, torch.full((9 * count,), 0.6), torch.zeros(9 * count), normal, view).radiance
+        colour = radiance_to_display_torch(radiance.reshape(count, 9, 3).mean(1))
+    start = BakedTextures(np.full((size, size, 3), 0.45, np.float32), np.full((size, size), 0.6, np.float32),
+                          np.zeros((size, size), np.float32), np.tile(np.float32([0, 0, 1]), (size, size, 1)),
+                          np.ones((size, size), bool))
+    config = TextureFitConfig(steps=400, learning_rate=0.05, metal_search=False, fit_materials=False)
+    footprint = PixelSamples(uv, normal, view, colour, footprint=9)
+    centre = PixelSamples(uv[4::9], normal[::9], view[::9], colour)  # one point at each pixel's centre
+    assert footprint.pixels == centre.pixels == count and torch.equal(footprint.pixel_uv, uv[::9])
+    part = footprint.subset(100, seed=1)
+    assert part.pixels == 100 and part.uv.shape == (900, 2) and torch.equal(part.pixel_uv, part.uv[::9])
+    with torch.no_grad():
+        fine, fine_report = fit_textures(start, footprint, lighting, config)
+        coarse, _ = fit_textures(start, centre, lighting, config)
+    assert fine_report.pixels == count
+    inner = slice(3, size - 3)  # away from the atlas border, which fewer pixels cover
+    is_bright = np.arange(size)[inner] % 6 < 3
+
+    def contrast(textures: BakedTextures) -> float:
+        columns = textures.base_color[inner, inner, 0].mean(0)
+        return float(columns[is_bright].mean() - columns[~is_bright].mean())
+
+    truth_contrast = bright - dark
+    assert contrast(fine) > 0.85 * truth_contrast and contrast(coarse) < 0.7 * truth_contrast, (contrast(fine), contrast(coarse))
+
+
+def test_footprint_samples_group_each_pixels_sub_samples(tmp_path, gl_context):
+    """Rasterised at 2 x 2 sub-samples per photo pixel: 4 rows per pixel, in the pixel's footprint,
+    and no more pixels than one sample each gives (a pixel needs all of its sub-samples covered)."""
+    cameras = _cameras(count=2, size=32)
+    export = export_field(SphereField(0.5, pattern=CHECKER), tmp_path / "sphere.glb", SMALL, context=gl_context)
+    mesh = mesh_for_rendering(export.uv_mesh, export.textures)
+    photos = PhotoViews(cameras, np.zeros((2, 32, 32, 3), np.float32), np.ones((2, 32, 32), np.float32))
+    one = sample_photo_pixels(mesh, photos, gl_context)
+    four = sample_photo_pixels(mesh, photos, gl_context, footprint=2)
+    assert four.footprint == 4 and four.uv.shape[0] == 4 * four.pixels and four.normal.shape[0] == 4 * four.pixels
+    assert 0.8 * one.pixels < four.pixels <= one.pixels
+    # A pixel's sub-samples look along nearly the same ray and land close together in the atlas.
+    spread = (four.view.reshape(-1, 4, 3) - four.view.reshape(-1, 4, 3).mean(1, keepdim=True)).norm(dim=-1).max()
+    assert spread < 0.05
