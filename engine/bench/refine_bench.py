@@ -17,6 +17,7 @@ import numpy as np
 from lirm.engine.evaluation.evaluate import EvalConfig
 from lirm.engine.evaluation.heldout_sets import HeldoutObject
 from lirm.engine.evaluation.evaluate import score_field, update_scores
+from lirm.engine.evaluation.relight_swaps import SWAPS
 from lirm.engine.evaluation.refined_rows import RELIGHT_KEYS, lirm_field, mean_of, per_object_scores, refine_inputs
 from lirm.engine.refine import initial_fields
 from lirm.engine.refine.refinable_field import RefinableField
@@ -25,6 +26,9 @@ from lirm.engine.errors import LirmUserError
 from lirm.engine.refine.config import LossWeights, RefineConfig
 
 from .peak_memory import PeakMemory, release_memory
+
+
+SWAP_KEYS = tuple(f"swap_{name}_relight_psnr_{kind}" for name in SWAPS for kind in ("l", "h"))
 
 
 def apply_options(config: RefineConfig, options: list[str]) -> RefineConfig:
@@ -57,13 +61,14 @@ def apply_options(config: RefineConfig, options: list[str]) -> RefineConfig:
 
 def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfig, base: RefineConfig, minutes: list[float],
                      init: str, progress=None, pictures: Path | None = None, true_lighting: bool = False,
-                     texture_fit: str = "on") -> dict:
+                     texture_fit: str = "on", swap_study: bool = False) -> dict:
     """With base.inverse_rendering, also the material and relighting scores (and, with `pictures`,
     the relighting test's pictures there); `true_lighting`: the oracle lit by the inputs' true
     environment instead of the estimate from their backgrounds; `texture_fit`: "on", the relighting
     test's export fits its textures to the input photos (RelightConfig.fit_textures), "off", "both"
     (the baked export scored too, under baked_ keys) or "search-both" (the fit without its metal search
-    scored too, under plain_ keys)."""
+    scored too, under plain_ keys); `swap_study`: also the relighting with parts swapped for the truth's
+    (relight_swaps.py; the objects must carry the truth's G-buffers), under swap_ keys."""
     meter = PeakMemory("cpu" if base.device == "cpu" else "cuda")
     budgets = []
     relighter = None
@@ -71,10 +76,12 @@ def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfi
         from lirm.engine.evaluation.relighting import RelightConfig, Relighter
 
         relighter = Relighter(RelightConfig(fit_textures=texture_fit != "off", also_baked=texture_fit == "both",
-                                            also_plain_fit=texture_fit == "search-both"), pictures=pictures)
+                                            also_plain_fit=texture_fit == "search-both", swap_study=swap_study),
+                              pictures=pictures)
     paired = {"both": "baked_", "search-both": "plain_"}.get(texture_fit)
     keys = ("psnr", "ssim", "albedo_psnr", "roughness_psnr", "metallic_psnr", "chamfer", "seconds", "steps") + (
-        RELIGHT_KEYS if relighter else ()) + (tuple(f"{paired}{k}" for k in RELIGHT_KEYS) if paired else ())
+        RELIGHT_KEYS if relighter else ()) + (tuple(f"{paired}{k}" for k in RELIGHT_KEYS) if paired else ()) + (
+        SWAP_KEYS if swap_study else ())
     try:
         for k, budget in enumerate(minutes):
             if progress:
@@ -120,6 +127,13 @@ def refine_bench_table(result: dict, set_name: str) -> str:
                       "| budget (min) | relight PSNR-H ↑ | relight PSNR-L ↑ |", "|---|---|---|"]
             for b in result["budgets"]:
                 lines.append(f"| {b['minutes']:g} | {b[prefix + 'relight_psnr_h']:.2f} | {b[prefix + 'relight_psnr_l']:.2f} |")
+    if result["budgets"] and "swap_export_relight_psnr_l" in result["budgets"][0]:
+        lines += ["", "Where the relighting error comes from (the export relit with parts swapped for the truth's; "
+                  "relight_swaps.py), PSNR-L / PSNR-H:", "",
+                  "| budget (min) | " + " | ".join(SWAPS) + " |", "|---|" + "---|" * len(SWAPS)]
+        for b in result["budgets"]:
+            lines.append(f"| {b['minutes']:g} | " + " | ".join(
+                f"{b[f'swap_{name}_relight_psnr_l']:.2f} / {b[f'swap_{name}_relight_psnr_h']:.2f}" for name in SWAPS) + " |")
     return "\n".join(lines) + "\n"
 
 

@@ -146,12 +146,12 @@ def heldout_objects(args: argparse.Namespace):
     renderer = PBRRenderer(ctx)
     try:
         if args.set == "synthetic":
-            return synthetic_heldout(renderer, args.objects, args.size)
+            return synthetic_heldout(renderer, args.objects, args.size, relight_gbuffers=getattr(args, "swap_study", False))
         models, envs = scan_model_folder(args.models), scan_environment_folder(args.environments)
         for scan, what in ((models, "glTF models"), (envs, "environments")):
             if scan.problems:
                 print(scan.report(what), file=sys.stderr)
-        return gltf_heldout(renderer, models.usable, envs.usable, args.size)
+        return gltf_heldout(renderer, models.usable, envs.usable, args.size, relight_gbuffers=getattr(args, "swap_study", False))
     finally:
         renderer.release()
         ctx.release()

@@ -60,7 +60,8 @@ class HeldoutObject:
 
 def _render_object(renderer: PBRRenderer, name: str, model: LoadedModel, environment, rotation_deg: float, turn_deg: float,
                    protocol: ProtocolViews, surface_points: int, seed: int, relight_environment=None,
-                   relight_rotation_deg: float = 0.0, picture_environment=None, picture_rotation_deg: float = 0.0) -> HeldoutObject:
+                   relight_rotation_deg: float = 0.0, picture_environment=None, picture_rotation_deg: float = 0.0,
+                   relight_gbuffers: bool = False) -> HeldoutObject:
     meshes = model.meshes
     transform = normalizing_transform(model.bounds)
     c, s = np.cos(np.radians(turn_deg)), np.sin(np.radians(turn_deg))
@@ -83,7 +84,7 @@ def _render_object(renderer: PBRRenderer, name: str, model: LoadedModel, environ
     relight = None
     if relight_environment is not None:
         relight = render_relight_truth(renderer, meshes, transform, protocol.cameras, list(protocol.outputs), relight_environment,
-                                       relight_rotation_deg, auto_exposure_ev(relight_environment))
+                                       relight_rotation_deg, auto_exposure_ev(relight_environment), relight_gbuffers)
     relight_also = None
     if picture_environment is not None:
         relight_also = render_relight_truth(renderer, meshes, transform, protocol.cameras, list(protocol.outputs)[:PICTURE_VIEWS],
@@ -94,7 +95,8 @@ def _render_object(renderer: PBRRenderer, name: str, model: LoadedModel, environ
 
 
 def synthetic_heldout(renderer: PBRRenderer, count: int = 8, size: int = 128, seed: int = 0,
-                      surface_points: int = 20_000) -> list[HeldoutObject]:
+                      surface_points: int = 20_000, relight_gbuffers: bool = False) -> list[HeldoutObject]:
+    """`relight_gbuffers`: keep the relighting truth's G-buffers (the swap study)."""
     config = ProtocolConfig(size=size, seed=seed)
     rng = np.random.default_rng([seed, 2024])
     environments = list(PROCEDURAL_ENVIRONMENTS)
@@ -114,12 +116,12 @@ def synthetic_heldout(renderer: PBRRenderer, count: int = 8, size: int = 128, se
         picture_rotation = float(np.random.default_rng([seed, 2026, i]).uniform(0, 360))
         objects.append(_render_object(renderer, f"{name}#{i}", model, env, rotation, turn,
                                       protocol_views(config, i), surface_points, seed + i, relight_env, relight_rotation,
-                                      picture_env, picture_rotation))
+                                      picture_env, picture_rotation, relight_gbuffers))
     return objects
 
 
 def gltf_heldout(renderer: PBRRenderer, models: list[Path], environments: list[Path], size: int = 128, seed: int = 0,
-                 surface_points: int = 20_000) -> list[HeldoutObject]:
+                 surface_points: int = 20_000, relight_gbuffers: bool = False) -> list[HeldoutObject]:
     config = ProtocolConfig(size=size, seed=seed)
     rng = np.random.default_rng([seed, 4202])
     objects = []
@@ -136,7 +138,7 @@ def gltf_heldout(renderer: PBRRenderer, models: list[Path], environments: list[P
             picture_rotation = float(np.random.default_rng([seed, 4204, i]).uniform(0, 360))
         objects.append(_render_object(renderer, Path(path).stem, model, env, rotation, 0.0,
                                       protocol_views(config, i), surface_points, seed + i, relight_env, relight_rotation,
-                                      picture_env, picture_rotation))
+                                      picture_env, picture_rotation, relight_gbuffers))
     return objects
 
 

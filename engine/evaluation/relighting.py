@@ -40,26 +40,44 @@ class RelightTruth:
     exposure_ev: float
     radiance: dict[int, np.ndarray]  # output view -> (H, W, 3) linear HDR, black background
     mask: dict[int, np.ndarray]  # output view -> (H, W) coverage
+    # For the swap study (relight_swaps.py) only: output view -> the truth's G-buffer at SWAP_SUPERSAMPLE
+    # times the view's size.
+    gbuffers: dict | None = None
 
     @property
     def name(self) -> str:
         return self.environment.name
 
 
+SWAP_SUPERSAMPLE = 2  # the relighting's own supersampling: the swap study shades G-buffers this much finer
+
+
 def render_relight_truth(renderer: PBRRenderer, meshes, transform: np.ndarray, cameras, outputs: list[int],
-                         environment: Environment, rotation_deg: float, exposure_ev: float) -> RelightTruth:
+                         environment: Environment, rotation_deg: float, exposure_ev: float,
+                         keep_gbuffers: bool = False) -> RelightTruth:
+    """`keep_gbuffers`: also keep the truth's G-buffers for the swap study (a few MB a view)."""
     scene = renderer.upload(meshes, transform)
     lighting = renderer.prepare_lighting(environment, rotation_deg=rotation_deg)
     settings = RenderSettings(show_environment=False, supersample=2)
-    radiance, mask = {}, {}
+    radiance, mask, gbuffers = {}, {}, {} if keep_gbuffers else None
     try:
         for i in outputs:
             out = renderer.render_view(scene, cameras[i], lighting, settings)
             radiance[i], mask[i] = out.radiance, out.mask
+            if keep_gbuffers:
+                gbuffers[i] = _gbuffer(renderer.render_view(scene, cameras[i].scaled(SWAP_SUPERSAMPLE), lighting,
+                                                            RenderSettings(show_environment=False, supersample=1)))
     finally:
         scene.release()
         lighting.maps.release()
-    return RelightTruth(environment, rotation_deg, exposure_ev, radiance, mask)
+    return RelightTruth(environment, rotation_deg, exposure_ev, radiance, mask, gbuffers)
+
+
+def _gbuffer(out):
+    """What the swap study reads of a render: no radiance, display image or depth."""
+    from types import SimpleNamespace
+
+    return SimpleNamespace(albedo=out.albedo, roughness=out.roughness, metallic=out.metallic, normal=out.normal, mask=out.mask)
 
 
 PICTURE_VIEWS = 3  # output views shown per picture
@@ -79,6 +97,9 @@ class RelightConfig:
     # With the fit on: also score the export fitted without the metal search, under "plain_" keys
     # (`lirm bench refine --materials --texture-fit search-both`).
     also_plain_fit: bool = False
+    # Also score the swap study (relight_swaps.py) on the scored export, under "swap_" keys: needs the
+    # truth's G-buffers (heldout sets built with relight_gbuffers).
+    swap_study: bool = False
 
 
 class Relighter:
@@ -139,6 +160,8 @@ class Relighter:
         try:
             shown = self._score_scene(scene, obj, truth, outputs, scores, lpips_net,
                                       keep=PICTURE_VIEWS if self.pictures is not None else 0)
+            if self.config.swap_study:
+                self._score_swaps(scene, obj, truth, outputs, scores)
             panels = [(truth.name, truth.exposure_ev, shown)]
             also = getattr(obj, "relight_also", None)
             if shown and also is not None:  # the pictures' second environment (not scored)
@@ -170,6 +193,25 @@ class Relighter:
             if len(shown) < keep:
                 shown.append((truth.radiance[i], truth.mask[i], out.radiance))
         return shown
+
+    def _score_swaps(self, scene, obj, truth: RelightTruth, outputs: list[int], scores: dict[str, list[float]]) -> None:
+        from lirm.engine.lighting.lighting_tables import tables_from_lighting
+
+        from .relight_swaps import swapped_images
+
+        if truth.gbuffers is None:
+            raise ValueError("the swap study needs the truth's G-buffers: build the held-out set with relight_gbuffers")
+        lighting = self._lighting_for(obj, truth)
+        tables = tables_from_lighting(self.renderer, lighting)
+        for i in outputs:
+            camera = obj.views.cameras[i].scaled(SWAP_SUPERSAMPLE)
+            export = self.renderer.render_view(scene, camera, lighting, RenderSettings(show_environment=False, supersample=1))
+            _, directions = camera.pixel_rays()
+            for name, (radiance, coverage) in swapped_images(export, truth.gbuffers[i], tables, directions,
+                                                             SWAP_SUPERSAMPLE).items():
+                metrics = relight_metrics(radiance, coverage, truth.radiance[i], truth.mask[i], truth.exposure_ev)
+                for key in ("relight_psnr_h", "relight_psnr_l"):
+                    scores.setdefault(f"swap_{name}_{key}", []).append(metrics[key])
 
     def _lighting_for(self, obj, truth: RelightTruth):
         key = (obj.name, truth.name, truth.rotation_deg)

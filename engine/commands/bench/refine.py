@@ -37,6 +37,9 @@ def add_parser(subparsers) -> None:
                              "`lirm export` does for a capture refined with materials), keeps the field's baked ones (off), "
                              "scores both exports of the same refined field (both: a paired ablation), or scores the fit "
                              "with and without its metal search (search-both)")
+    parser.add_argument("--swap-study", action="store_true",
+                        help="with --materials: also relight the export with parts swapped for the truth's (albedo, all "
+                             "materials, geometry, the albedo's detail or coarse colour): where the relighting error comes from")
     parser.add_argument("--json", type=Path, help="also write every object's numbers here")
     parser.set_defaults(run=run)
 
@@ -54,6 +57,8 @@ def run(args: argparse.Namespace) -> int:
         raise LirmUsageError("--lighting truth lights the inverse rendering, which only --materials runs; add --materials")
     if args.texture_fit != "on" and not args.materials:
         raise LirmUsageError("--texture-fit changes the relighting test's export, which only --materials runs; add --materials")
+    if args.swap_study and (not args.materials or args.warm_start):
+        raise LirmUsageError("--swap-study takes the relighting test apart, which only --materials runs (not --warm-start)")
     if args.lighting == "truth" and args.warm_start:
         raise LirmUsageError("--lighting truth is for the budget table, not --warm-start")
     require_range(args, "size", VIEW_SIZE, " pixels")
@@ -78,7 +83,8 @@ def run(args: argparse.Namespace) -> int:
         try:
             result = run_refine_bench(source.model, objects, EvalConfig(output_views=args.output_views), base, args.minutes,
                                       args.init, progress=bar_updater(bar), pictures=args.pictures,
-                                      true_lighting=args.lighting == "truth", texture_fit=args.texture_fit)
+                                      true_lighting=args.lighting == "truth", texture_fit=args.texture_fit,
+                                      swap_study=args.swap_study)
         finally:
             bar.close()
         table = refine_bench_table(result, args.set)
