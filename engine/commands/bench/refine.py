@@ -58,7 +58,8 @@ def run(args: argparse.Namespace) -> int:
     if args.texture_fit != "on" and not args.materials:
         raise LirmUsageError("--texture-fit changes the relighting test's export, which only --materials runs; add --materials")
     if args.swap_study and (not args.materials or args.warm_start):
-        raise LirmUsageError("--swap-study takes the relighting test apart, which only --materials runs (not --warm-start)")
+        raise LirmUsageError("--swap-study takes apart the relighting test, which only --materials runs (and not with "
+                             "--warm-start); add --materials")
     if args.lighting == "truth" and args.warm_start:
         raise LirmUsageError("--lighting truth is for the budget table, not --warm-start")
     require_range(args, "size", VIEW_SIZE, " pixels")

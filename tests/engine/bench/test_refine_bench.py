@@ -42,3 +42,20 @@ def test_bench_refine_texture_fit_needs_materials(capsys):
 def test_bench_refine_true_lighting_needs_materials(capsys):
     assert main(["bench", "refine", "--objects", "1", "--lighting", "truth"]) == 2
     assert "add --materials" in capsys.readouterr().err
+
+
+def test_bench_refine_swap_study_needs_materials(capsys):
+    assert main(["bench", "refine", "--objects", "1", "--swap-study"]) == 2
+    assert "add --materials" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_bench_refine_swap_study_takes_the_relighting_apart(tmp_path, capsys):
+    assert main(["bench", "refine", "--objects", "1", "--size", "48", "--output-views", "1", "--minutes", "0.05",
+                 "--init", "hull", "--materials", "--swap-study", "--json", str(tmp_path / "r.json")]) == 0
+    assert "Where the relighting error comes from" in capsys.readouterr().out
+    budget = json.loads((tmp_path / "r.json").read_text())["budgets"][0]
+    swaps = {k: v for k, v in budget.items() if k.startswith("swap_")}
+    assert len(swaps) == 12 and all(np.isfinite(v) for v in swaps.values()), swaps
+    # The unswapped torch shading is the relighting test's own render of the export.
+    assert abs(budget["swap_export_relight_psnr_l"] - budget["relight_psnr_l"]) < 0.5, budget
