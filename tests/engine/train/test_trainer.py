@@ -9,6 +9,7 @@ import os
 import socket
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -108,7 +109,9 @@ def test_batch_scenes_overrides_the_stages_batch():
 
 def test_a_later_stage_starts_from_the_earlier_stages_weights(tmp_path, cache):
     first = run_training(_config(tmp_path / "s1", cache, max_steps=1, checkpoint_every=1))
-    second = run_training(_config(tmp_path / "s2", cache, stage=3, max_steps=1, resume=str(first.checkpoint)))
+    # Stage 3 feeds 3 sets of up to 6 inputs: its scenes need 18 views (the trainer refuses fewer).
+    second = run_training(_config(tmp_path / "s2", cache, stage=3, max_steps=1, resume=str(first.checkpoint),
+                                  scenes=replace(SCENES, views=18)))
     assert second.first_step == 0 and second.last_step == 1
     record = second.history[0]
     assert "numerical_normal" in record and record["loss_update3"] > 0  # stage 3: three updates, SDF normals
@@ -199,8 +202,6 @@ def test_a_second_ctrl_c_stops_at_once_and_still_writes_the_slim_copy(tmp_path, 
 
 
 def test_the_trainer_itself_refuses_scenes_too_small_for_the_update_sets(tmp_path, cache):
-    from dataclasses import replace
-
     from lirm.engine.errors import LirmUsageError
 
     with pytest.raises(LirmUsageError, match="each scene needs at least 12"):
