@@ -323,6 +323,15 @@ def _scaled_camera(camera, k: int):
     )
 
 
+def box_downsample(image: np.ndarray, k: int) -> np.ndarray:
+    """(kH, kW, ...) -> (H, W, ...): the mean of each k x k block, as the supersampling resolves radiance
+    (background counted as black)."""
+    if k == 1:
+        return image
+    h, w = image.shape[0] // k, image.shape[1] // k
+    return image.reshape(h, k, w, k, *image.shape[2:]).mean(axis=(1, 3))
+
+
 def downsample_reference(out: RenderOutput, k: int) -> RenderOutput:
     """Box-filter k x k blocks; G-buffer channels average over covered sub-pixels only. The numpy
     reference of resolve_supersample.frag, which render_view uses (tests hold the two together)."""
@@ -346,8 +355,8 @@ def downsample_reference(out: RenderOutput, k: int) -> RenderOutput:
     normal = np.where(length > 1e-8, normal / np.maximum(length, 1e-8), 0.0).astype(np.float32)
     return replace(
         out,
-        beauty=blocks(out.beauty).mean(axis=(1, 3)).astype(np.float32),
-        radiance=blocks(out.radiance).mean(axis=(1, 3)).astype(np.float32),
+        beauty=box_downsample(out.beauty, k).astype(np.float32),
+        radiance=box_downsample(out.radiance, k).astype(np.float32),
         albedo=covered_mean(out.albedo),
         roughness=covered_mean(out.roughness),
         metallic=covered_mean(out.metallic),

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from .. import progress_events
+from ..errors import LirmUsageError
 from .common import check_export_memory, check_export_options, check_output, require_capture
 
 
@@ -26,6 +27,9 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--no-texture-fit", action="store_true",
                         help="keep the field's baked textures: do not fit them to the photos afterwards (done by default for a "
                              "state refined with materials, `lirm refine --materials`)")
+    parser.add_argument("--register-photos", action="store_true",
+                        help="before fitting the textures, register each photo to the export by a smooth warp of up to 3 px "
+                             "(for photos whose poses are a little off; measured worth nothing on exactly posed photos)")
     parser.set_defaults(run=run)
 
 
@@ -37,6 +41,9 @@ def run(args: argparse.Namespace) -> int:
     from ..export.field_mesh import MeshExtractionConfig
 
     check_export_options(args)
+    if args.register_photos and args.no_texture_fit:
+        raise LirmUsageError("--register-photos registers the photos for the texture fit, which --no-texture-fit turns off: "
+                             "leave out one of them")
     require_capture(args.capture)
     if args.out is None:
         args.out = args.capture / "export" / "asset.glb"
@@ -49,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     check_export_memory(args)
     config = ExportConfig(mesh=replace(MeshExtractionConfig(), resolution=args.grid, face_budget=args.faces),
                           texture_size=args.texture, normal_map=not args.no_normal_map, obj=args.obj,
-                          usdz=args.usdz, **({"texture_fit": None} if args.no_texture_fit else {}))
+                          usdz=args.usdz, **_texture_fit_setting(args))
     result, source = export_capture(args.capture, args.out, config, args.checkpoint,
                                     progress=_export_progress, update=args.update)
     from ..capture.capture_folder import Capture
@@ -84,3 +91,16 @@ def _export_progress(stage: str, done: int, total: int) -> None:
     progress_events.emit(stage, done, total)
     print(f"[{done}/{total}] {stage}", file=sys.stderr)
 
+
+def _texture_fit_setting(args: argparse.Namespace) -> dict:
+    """ExportConfig's texture_fit as the options ask (nothing: its default)."""
+    from ..export.photo_texture_fit import TextureFitConfig
+
+    if args.no_texture_fit:
+        return {"texture_fit": None}
+    if args.register_photos:
+        return {"texture_fit": TextureFitConfig(register_grid=REGISTER_GRID)}
+    return {}
+
+
+REGISTER_GRID = 4  # nodes per side of each photo's warp lattice (README, "Registering the photos")

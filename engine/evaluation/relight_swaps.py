@@ -25,6 +25,7 @@ import numpy as np
 import torch
 
 from lirm.engine.lighting.split_sum_shading import shade
+from lirm.renderer.pbr_renderer import box_downsample
 
 DETAIL_SIGMA = 2.0  # output pixels: what is finer than this Gaussian counts as the albedo's detail
 SWAPS = ("export", "truth_albedo", "truth_materials", "truth_geometry", "truth_albedo_detail", "truth_albedo_coarse")
@@ -79,13 +80,5 @@ def swapped_images(export, truth, tables, directions: np.ndarray, supersample: i
         "truth_albedo_detail": (on_export(mix(export.albedo, export_coarse * truth_detail)), export.mask),
         "truth_albedo_coarse": (on_export(mix(export.albedo, truth_coarse * export_detail)), export.mask),
     }
-    return {name: (_downsample(image, supersample), _downsample(coverage[..., None], supersample)[..., 0])
+    return {name: (box_downsample(image, supersample), box_downsample(coverage[..., None], supersample)[..., 0])
             for name, (image, coverage) in images.items()}
-
-
-def _downsample(image: np.ndarray, k: int) -> np.ndarray:
-    """k x k box average, as the renderer resolves its supersampling (background counted as black)."""
-    if k == 1:
-        return image
-    h, w, c = image.shape
-    return image.reshape(h // k, k, w // k, k, c).mean((1, 3))

@@ -40,7 +40,7 @@ class RelightTruth:
     exposure_ev: float
     radiance: dict[int, np.ndarray]  # output view -> (H, W, 3) linear HDR, black background
     mask: dict[int, np.ndarray]  # output view -> (H, W) coverage
-    # For the swap study (relight_swaps.py) only: output view -> the truth's G-buffer at SWAP_SUPERSAMPLE
+    # For the swap study (relight_swaps.py) only: output view -> the truth's G-buffer at RELIGHT_SUPERSAMPLE
     # times the view's size.
     gbuffers: dict | None = None
 
@@ -49,7 +49,8 @@ class RelightTruth:
         return self.environment.name
 
 
-SWAP_SUPERSAMPLE = 2  # the relighting's own supersampling: the swap study shades G-buffers this much finer
+RELIGHT_SUPERSAMPLE = 2  # the relighting's own supersampling: the swap study shades G-buffers this much finer
+RELIGHT_SETTINGS = RenderSettings(show_environment=False, supersample=RELIGHT_SUPERSAMPLE)
 
 
 def render_relight_truth(renderer: PBRRenderer, meshes, transform: np.ndarray, cameras, outputs: list[int],
@@ -58,14 +59,13 @@ def render_relight_truth(renderer: PBRRenderer, meshes, transform: np.ndarray, c
     """`keep_gbuffers`: also keep the truth's G-buffers for the swap study (a few MB a view)."""
     scene = renderer.upload(meshes, transform)
     lighting = renderer.prepare_lighting(environment, rotation_deg=rotation_deg)
-    settings = RenderSettings(show_environment=False, supersample=2)
     radiance, mask, gbuffers = {}, {}, {} if keep_gbuffers else None
     try:
         for i in outputs:
-            out = renderer.render_view(scene, cameras[i], lighting, settings)
+            out = renderer.render_view(scene, cameras[i], lighting, RELIGHT_SETTINGS)
             radiance[i], mask[i] = out.radiance, out.mask
             if keep_gbuffers:
-                gbuffers[i] = _gbuffer(renderer.render_view(scene, cameras[i].scaled(SWAP_SUPERSAMPLE), lighting,
+                gbuffers[i] = _gbuffer(renderer.render_view(scene, cameras[i].scaled(RELIGHT_SUPERSAMPLE), lighting,
                                                             RenderSettings(show_environment=False, supersample=1)))
     finally:
         scene.release()
@@ -169,7 +169,7 @@ class Relighter:
                 views = [i for i in outputs if i in also.radiance][:PICTURE_VIEWS]
                 panels.append((also.name, also.exposure_ev, [
                     (also.radiance[i], also.mask[i], self.renderer.render_view(
-                        scene, obj.views.cameras[i], second, RenderSettings(show_environment=False, supersample=2)).radiance)
+                        scene, obj.views.cameras[i], second, RELIGHT_SETTINGS).radiance)
                     for i in views]))
         finally:
             scene.release()
@@ -186,7 +186,7 @@ class Relighter:
         lighting = self._lighting_for(obj, truth)
         shown = []
         for i in outputs:
-            out = self.renderer.render_view(scene, obj.views.cameras[i], lighting, RenderSettings(show_environment=False, supersample=2))
+            out = self.renderer.render_view(scene, obj.views.cameras[i], lighting, RELIGHT_SETTINGS)
             for key, value in relight_metrics(out.radiance, out.mask, truth.radiance[i], truth.mask[i], truth.exposure_ev,
                                               lpips_net).items():
                 scores.setdefault(prefix + key, []).append(value)
@@ -204,11 +204,11 @@ class Relighter:
         lighting = self._lighting_for(obj, truth)
         tables = tables_from_lighting(self.renderer, lighting)
         for i in outputs:
-            camera = obj.views.cameras[i].scaled(SWAP_SUPERSAMPLE)
+            camera = obj.views.cameras[i].scaled(RELIGHT_SUPERSAMPLE)
             export = self.renderer.render_view(scene, camera, lighting, RenderSettings(show_environment=False, supersample=1))
             _, directions = camera.pixel_rays()
             for name, (radiance, coverage) in swapped_images(export, truth.gbuffers[i], tables, directions,
-                                                             SWAP_SUPERSAMPLE).items():
+                                                             RELIGHT_SUPERSAMPLE).items():
                 metrics = relight_metrics(radiance, coverage, truth.radiance[i], truth.mask[i], truth.exposure_ev)
                 for key in ("relight_psnr_h", "relight_psnr_l"):
                     scores.setdefault(f"swap_{name}_{key}", []).append(metrics[key])

@@ -39,6 +39,7 @@ from lirm.engine.lighting.split_sum_shading import shade
 from lirm.engine.lighting.tabulated_lighting import TabulatedLighting
 
 from .metal_search import AS_FITTED, DIELECTRIC, METAL, choose_hypotheses
+from .photo_registration import PhotoSources, ViewWarps, photo_sources, read_photos
 from .texture_bake import BakedTextures, dilate
 from .uv_atlas import UVMesh
 
@@ -76,6 +77,15 @@ class TextureFitConfig:
     search_final_steps: int = 100  # steps of the joint fit after the choice (instead of `steps`)
     metal_search_sigma: float = 2.0  # texels: the neighbourhood whose summed error each choice reads
     metal_search_margin: float = 0.1  # the field's hypothesis is kept unless another's error is this share lower
+    # Registration (photo_registration.py): before the fits, each photo gets a register_grid x
+    # register_grid lattice of pixel offsets, fitted with the textures for register_steps, and the
+    # photos are read at the registered positions from then on. 0: off.
+    register_grid: int = 0
+    register_steps: int = 100
+    register_max_shift: float = 3.0  # pixels
+    register_smooth: float = 0.01  # weight of the lattice's smoothness (pixels², against a mean L1 of display values)
+    register_anchor: float = 0.01  # weight of the mean squared offset (pixels²): the smallest warps that agree
+    register_learning_rate: float = 0.05  # Adam, pixels a step at most
 
     def __post_init__(self) -> None:
         if self.steps < 0:
@@ -84,6 +94,9 @@ class TextureFitConfig:
             raise ValueError(f"learning_rate must be positive, got {self.learning_rate}")
         if self.footprint < 1:
             raise ValueError(f"footprint must be >= 1 sub-sample per side, got {self.footprint}")
+        if self.register_grid == 1 or self.register_grid < 0 or self.register_steps < 1 or not self.register_max_shift > 0:
+            raise ValueError(f"registration needs register_grid 0 (off) or >= 2, register_steps >= 1 and a positive "
+                             f"register_max_shift, got {self.register_grid}, {self.register_steps}, {self.register_max_shift}")
         if self.search_steps < 1 or self.search_final_steps < 0:
             raise ValueError(f"the metal search needs search_steps >= 1 and search_final_steps >= 0, "
                              f"got {self.search_steps} and {self.search_final_steps}")
@@ -109,6 +122,7 @@ class TextureFitReport:
     stopped: bool = False
     metal_share: float | None = None  # of the covered texels, chosen as metal by the metal search (None: no search)
     dielectric_share: float | None = None  # chosen as paint (metallic 0) against the field's metallic
+    registration_shift: float | None = None  # mean offset (pixels) the registration moved the photo pixels by (None: off)
 
     def summary(self) -> str:
         text = (f"textures fitted to {self.views} photos ({self.pixels} pixels, {self.steps} steps, {self.seconds:.1f} s): "
@@ -116,6 +130,8 @@ class TextureFitReport:
         if self.metal_share is not None:
             text += (f"; metal search: {100 * self.metal_share:.1f}% of the texels metal, "
                      f"{100 * self.dielectric_share:.1f}% paint, the rest as the field had them")
+        if self.registration_shift is not None:
+            text += f"; photos registered (mean shift {self.registration_shift:.2f} px)"
         return text
 
 
@@ -129,6 +145,7 @@ class PixelSamples:
     view: torch.Tensor  # (N * footprint, 3) unit surface-to-eye direction
     colour: torch.Tensor  # (N, 3) the photo's display sRGB
     footprint: int = 1  # sub-samples per pixel (k x k for a footprint of k per side)
+    sources: PhotoSources | None = None  # where each pixel lies in its photo (needed by the registration)
 
     @property
     def pixels(self) -> int:
@@ -146,7 +163,8 @@ class PixelSamples:
             return self
         keep = torch.randperm(total, generator=torch.Generator().manual_seed(seed))[:count]
         rows = (keep[:, None] * self.footprint + torch.arange(self.footprint)).reshape(-1)
-        return PixelSamples(self.uv[rows], self.normal[rows], self.view[rows], self.colour[keep], self.footprint)
+        return PixelSamples(self.uv[rows], self.normal[rows], self.view[rows], self.colour[keep], self.footprint,
+                            self.sources.subset(keep) if self.sources is not None else None)
 
 
 def mesh_for_rendering(uv_mesh: UVMesh, textures: BakedTextures):
@@ -171,7 +189,7 @@ def sample_photo_pixels(mesh, photos: PhotoViews, context, min_photo_alpha: floa
     scene = renderer.upload([mesh])
     # The G-buffer's texture coordinates and normals do not depend on the light; any will do.
     lighting = renderer.prepare_lighting(Environment(np.full((8, 16, 3), 0.5, np.float32), "grey"))
-    uv, normal, view, colour = [], [], [], []
+    uv, normal, view, colour, pixel_xy = [], [], [], [], []
     try:
         k = footprint
         for camera, image, mask in zip(photos.cameras, photos.images, photos.masks):
@@ -186,13 +204,16 @@ def sample_photo_pixels(mesh, photos: PhotoViews, context, min_photo_alpha: floa
                 a.shape[0] // k, a.shape[1] // k, k * k, -1)
             # A pixel whose G-buffer is not finite (a zero vertex normal normalised to NaN) cannot be
             # shaded, and one NaN reaching the BRDF table's lookup would end the whole fit.
-            finite = (np.isfinite(group(out.normal)).all(-1) & np.isfinite(group(out.uv)).all(-1)).all(-1)
+            pixel_uv, pixel_normal = group(out.uv), group(out.normal)
+            finite = (np.isfinite(pixel_normal).all(-1) & np.isfinite(pixel_uv).all(-1)).all(-1)
             covered = (group(out.mask[..., None])[..., 0] > 0.999).all(-1)
             use = covered & (np.asarray(mask) >= min_photo_alpha) & finite
-            uv.append(group(out.uv)[use].reshape(-1, 2))
-            normal.append(group(out.normal)[use].reshape(-1, 3))
+            uv.append(pixel_uv[use].reshape(-1, 2))
+            normal.append(pixel_normal[use].reshape(-1, 3))
             view.append(-group(directions)[use].reshape(-1, 3))
             colour.append(np.asarray(image)[use])
+            rows, columns = np.nonzero(use)  # the same row-major order as the boolean selections above
+            pixel_xy.append(np.stack([columns + 0.5, rows + 0.5], -1))
     finally:
         scene.release()
         lighting.maps.release()
@@ -201,7 +222,8 @@ def sample_photo_pixels(mesh, photos: PhotoViews, context, min_photo_alpha: floa
         np.concatenate(parts).astype(np.float32) if parts else np.zeros((0, width), np.float32))
     n = as_tensor(normal, 3)
     n = n / n.norm(dim=-1, keepdim=True).clamp(min=1e-12)
-    return PixelSamples(as_tensor(uv, 2), n, as_tensor(view, 3), as_tensor(colour, 3), footprint * footprint)
+    return PixelSamples(as_tensor(uv, 2), n, as_tensor(view, 3), as_tensor(colour, 3), footprint * footprint,
+                        photo_sources(pixel_xy, photos.images, photos.masks))
 
 
 METAL_HELD = (0.02, 0.98)  # the metallic the dielectric and metal hypotheses are held at (logits stay finite)
@@ -226,19 +248,27 @@ class _Shading:
         self.light = TabulatedLighting(lighting, samples.normal, samples.view, config.lighting_levels)
         self.grid = (samples.uv * 2.0 - 1.0)[None, None]
         self.clip_level = config.clip_level
-        self.clipped = samples.colour >= config.clip_level if config.clip_level is not None else None
+        self.use_colour(samples.colour)
 
-    def errors(self, albedo_logit: torch.Tensor, roughness_logit: torch.Tensor, metallic_logit: torch.Tensor) -> torch.Tensor:
-        """(N, 3) absolute display-value error per pixel and channel."""
+    def use_colour(self, colour: torch.Tensor) -> None:
+        """The photo colours (N, 3) the errors are measured against from now on (the registered ones)."""
+        self.colour = colour
+        self.clipped = colour >= self.clip_level if self.clip_level is not None else None
+
+    def errors(self, albedo_logit: torch.Tensor, roughness_logit: torch.Tensor, metallic_logit: torch.Tensor,
+               colour: torch.Tensor | None = None) -> torch.Tensor:
+        """(N, 3) absolute display-value error per pixel and channel (against `colour`, or the colours in use)."""
         grid, samples = self.grid, self.samples
+        clipped = self.clipped if colour is None else (colour >= self.clip_level if self.clip_level is not None else None)
+        colour = self.colour if colour is None else colour
         shaded = shade(self.light, _lookup(torch.sigmoid(albedo_logit), grid), _lookup(torch.sigmoid(roughness_logit), grid)[:, 0],
                        _lookup(torch.sigmoid(metallic_logit), grid)[:, 0], samples.normal, samples.view).radiance
         if samples.footprint > 1:  # the pixel integrates its footprint in linear light
             shaded = shaded.reshape(-1, samples.footprint, 3).mean(1)
         predicted = radiance_to_display_torch(shaded)
-        difference = predicted - samples.colour
-        if self.clipped is not None:  # (the tone curve never reaches 1: a clipped value is compared with the level)
-            difference = torch.where(self.clipped, (self.clip_level - predicted).clamp(min=0.0), difference)
+        difference = predicted - colour
+        if clipped is not None:  # (the tone curve never reaches 1: a clipped value is compared with the level)
+            difference = torch.where(clipped, (self.clip_level - predicted).clamp(min=0.0), difference)
         return difference.abs()
 
 
@@ -251,22 +281,33 @@ class _Logits:
 
 def _fit(shading: _Shading, start: _Logits, config: TextureFitConfig, steps: int, fit_metallic: bool,
          prior: tuple[torch.Tensor, torch.Tensor], progress: Callable[[int], None] | None = None,
-         should_stop: Callable[[], bool] | None = None) -> tuple[_Logits, int, bool]:
+         should_stop: Callable[[], bool] | None = None, warps: ViewWarps | None = None) -> tuple[_Logits, int, bool]:
     """Adam on the logits from `start` for `steps`; roughness (and metallic when fitted) held to
-    `prior` (their values, (S, S, 1)) by the quadratic prior. Returns the logits, the steps taken and
-    whether `should_stop` ended it."""
+    `prior` (their values, (S, S, 1)) by the quadratic prior. With `warps`, the photos are read
+    through them at every step and they are fitted too (the registration). Returns the logits, the
+    steps taken and whether `should_stop` ended it."""
     albedo = torch.nn.Parameter(start.albedo.clone())
     roughness = torch.nn.Parameter(start.roughness.clone())
     metallic = torch.nn.Parameter(start.metallic.clone())
     params = [albedo] + ([roughness] + ([metallic] if fit_metallic else []) if config.fit_materials else [])
-    optimiser = torch.optim.Adam(params, lr=config.learning_rate)
+    groups = [{"params": params, "lr": config.learning_rate}]
+    if warps is not None:
+        groups.append({"params": list(warps.parameters()), "lr": config.register_learning_rate})
+    optimiser = torch.optim.Adam(groups)
     taken, stopped = 0, False
     with torch.enable_grad():  # callers score under no_grad (the evaluation); this fit needs its gradients
         for step in range(steps):
             if should_stop is not None and should_stop():
                 stopped = True
                 break
-            loss = shading.errors(albedo, roughness, metallic).mean()
+            if warps is None:
+                loss = shading.errors(albedo, roughness, metallic).mean()
+            else:  # pixels whose registered place leaves their photo's mask say nothing this step
+                colour, alpha = read_photos(shading.samples.sources, warps.offsets(shading.samples.sources))
+                inside = (alpha.detach() >= config.min_photo_alpha).float()
+                error = shading.errors(albedo, roughness, metallic, colour).mean(-1)
+                loss = (error * inside).sum() / inside.sum().clamp(min=1.0) + config.register_smooth * warps.smoothness()
+                loss = loss + config.register_anchor * warps.magnitude()
             if config.fit_materials and config.material_prior:
                 held = ((torch.sigmoid(roughness) - prior[0]) ** 2).mean()
                 if fit_metallic:
@@ -296,23 +337,34 @@ def fit_textures(textures: BakedTextures, samples: PixelSamples, lighting, confi
     shading = _Shading(samples, lighting, config)
     baked = _Logits(_logit(textures.base_color), _logit(textures.roughness[..., None]), _logit(textures.metallic[..., None]))
     searching = config.metal_search and config.fit_materials
+    registering = config.register_grid > 0
     final_steps = config.search_final_steps if searching else config.steps
-    total = final_steps + (3 * config.search_steps if searching else 0)
+    register_steps = config.register_steps if registering else 0
+    total = register_steps + final_steps + (3 * config.search_steps if searching else 0)
     done = 0
 
     def tick(step: int) -> None:
         if progress and (done + step) % 20 == 0:
-            what = "choosing metal or not per texel" if searching and done < 3 * config.search_steps else "fitting the textures to the photos"
+            if done + step < register_steps:
+                what = "registering the photos"
+            elif searching and done < register_steps + 3 * config.search_steps:
+                what = "choosing metal or not per texel"
+            else:
+                what = "fitting the textures to the photos"
             progress(f"{what} ({done + step}/{total})", done + step, total)
 
     with torch.no_grad():
         loss_before = float(shading.errors(baked.albedo, baked.roughness, baked.metallic).mean())
-    stopped, steps, choice = False, 0, None
+    stopped, steps, choice, shift = False, 0, None, None
     begin = baked
     prior = (torch.sigmoid(baked.roughness), torch.sigmoid(baked.metallic))
-    if searching:
-        begin, prior, choice, steps, stopped = _search_metal(shading, baked, textures.base_color.shape[0], config, tick,
-                                                              should_stop)
+    if registering:
+        shift, steps, stopped = _register(shading, baked, config, prior, tick, should_stop)
+        done = steps
+    if searching and not stopped:
+        begin, prior, choice, taken, stopped = _search_metal(shading, baked, textures.base_color.shape[0], config,
+                                                              tick, should_stop)
+        steps += taken
         done = steps
     if not stopped:
         fitted, taken, stopped = _fit(shading, begin, config, final_steps, True, prior, tick, should_stop)
@@ -328,10 +380,29 @@ def fit_textures(textures: BakedTextures, samples: PixelSamples, lighting, confi
                             dilate(as_texture(fitted.metallic), covered, config.dilation)[..., 0],
                             textures.normal, covered)
     report = TextureFitReport(views, count, steps, time.perf_counter() - start, loss_before, loss_after, stopped)
+    report.registration_shift = shift
     if choice is not None:
         report.metal_share = choice.share(METAL, covered)
         report.dielectric_share = choice.share(DIELECTRIC, covered)
     return out, report
+
+
+def _register(shading: _Shading, baked: _Logits, config: TextureFitConfig, prior: tuple[torch.Tensor, torch.Tensor],
+              tick: Callable[[int], None], should_stop: Callable[[], bool] | None) -> tuple[float, int, bool]:
+    """Fit each photo's warp lattice with the textures (from the baked ones), then let the shading read
+    every pixel's colour at its registered place; the textures of this fit are not kept (the fits
+    after it start from the baked ones again, now against registered photos). A pixel whose
+    registered place leaves its photo's mask keeps its own colour. Returns the mean shift (pixels),
+    the steps taken and whether `should_stop` ended it."""
+    sources = shading.samples.sources
+    if sources is None:
+        raise ValueError("registering the photos needs each pixel's place in its photo (sample_photo_pixels records it)")
+    warps = ViewWarps(sources.views, config.register_grid, config.register_max_shift)
+    _, taken, stopped = _fit(shading, baked, config, config.register_steps, True, prior, tick, should_stop, warps=warps)
+    with torch.no_grad():
+        colour, alpha = read_photos(sources, warps.offsets(sources))
+        shading.use_colour(torch.where((alpha >= config.min_photo_alpha)[:, None], colour, shading.samples.colour))
+    return warps.mean_shift(sources), taken, stopped
 
 
 def _search_metal(shading: _Shading, baked: _Logits, size: int, config: TextureFitConfig, tick: Callable[[int], None],

@@ -9,7 +9,7 @@ import torch
 
 from lirm.engine.cameras import Camera, look_at
 from lirm.engine.evaluation.relight_swaps import SWAPS, swapped_images
-from lirm.engine.evaluation.relighting import SWAP_SUPERSAMPLE, relight_metrics, render_relight_truth
+from lirm.engine.evaluation.relighting import RELIGHT_SUPERSAMPLE, relight_metrics, render_relight_truth
 from lirm.engine.export.export_asset import ExportConfig, export_field
 from lirm.engine.export.field_mesh import MeshExtractionConfig
 from lirm.engine.export.photo_texture_fit import mesh_for_rendering
@@ -42,9 +42,9 @@ def test_swapping_in_the_true_albedo_fixes_an_export_whose_albedo_is_wrong(tmp_p
         tables = tables_from_lighting(renderer, lighting)
         scores = {name: [] for name in SWAPS}
         for i, camera in enumerate(cameras):
-            fine = camera.scaled(SWAP_SUPERSAMPLE)
+            fine = camera.scaled(RELIGHT_SUPERSAMPLE)
             gbuffer = renderer.render_view(scene, fine, lighting, RenderSettings(show_environment=False, supersample=1))
-            images = swapped_images(gbuffer, relit.gbuffers[i], tables, fine.pixel_rays()[1], SWAP_SUPERSAMPLE)
+            images = swapped_images(gbuffer, relit.gbuffers[i], tables, fine.pixel_rays()[1], RELIGHT_SUPERSAMPLE)
             assert set(images) == set(SWAPS) and images["export"][0].shape == (48, 48, 3)
             for name, (radiance, coverage) in images.items():
                 scores[name].append(relight_metrics(radiance, coverage, relit.radiance[i], relit.mask[i], 0.0)["relight_psnr_l"])

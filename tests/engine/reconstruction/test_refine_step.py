@@ -139,3 +139,8 @@ def test_refine_with_materials_fits_them_under_the_capture_lighting(capture, cap
     assert float(fitted.group(3)) < float(fitted.group(2))
     assert main(["export", str(capture), "-o", str(capture / "baked.glb"), "--no-texture-fit"] + export) == 0
     assert "textures fitted" not in capsys.readouterr().out
+    # --register-photos: each photo warped onto the export before the fit, which says by how much.
+    assert main(["export", str(capture), "-o", str(capture / "registered.glb"), "--register-photos"] + export) == 0
+    assert re.search(r"photos registered \(mean shift [\d.]+ px\)", capsys.readouterr().out)
+    assert main(["export", str(capture), "-o", str(capture / "both.glb"), "--register-photos", "--no-texture-fit"] + export) == 2
+    assert "leave out one of them" in capsys.readouterr().err and not (capture / "both.glb").exists()
