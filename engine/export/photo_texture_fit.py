@@ -77,6 +77,11 @@ class TextureFitConfig:
     search_final_steps: int = 100  # steps of the joint fit after the choice (instead of `steps`)
     metal_search_sigma: float = 2.0  # texels: the neighbourhood whose summed error each choice reads
     metal_search_margin: float = 0.1  # the field's hypothesis is kept unless another's error is this share lower
+    # The search's three fits shade one sub-sample of each pixel's footprint (the joint fit after it
+    # all of them): the search only chooses per texel, from errors pooled over a few texels. Halves
+    # the fit's time at a footprint of 2 (a synthetic object's 99 s -> 50 s) and relit the same (synthetic
+    # set 22.06 -> 22.06 dB PSNR-L, glTF pair 23.82 -> 23.79; README, "The pixel footprint").
+    search_one_sample: bool = True
     # Registration (photo_registration.py): before the fits, each photo gets a register_grid x
     # register_grid lattice of pixel offsets, fitted with the textures for register_steps, and the
     # photos are read at the registered positions from then on. 0: off.
@@ -150,6 +155,13 @@ class PixelSamples:
     @property
     def pixels(self) -> int:
         return int(self.colour.shape[0])
+
+    def one_sample(self) -> "PixelSamples":
+        """The same pixels, each shaded at its first sub-sample only (itself, with a footprint of 1)."""
+        if self.footprint == 1:
+            return self
+        f = self.footprint
+        return PixelSamples(self.uv[::f], self.normal[::f], self.view[::f], self.colour, 1, self.sources)
 
     @property
     def pixel_uv(self) -> torch.Tensor:
@@ -243,9 +255,11 @@ def _lookup(texture: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
 class _Shading:
     """The photometric error of texture logits at the sampled pixels, under the tabulated lighting."""
 
-    def __init__(self, samples: PixelSamples, lighting, config: TextureFitConfig):
+    def __init__(self, samples: PixelSamples, lighting, config: TextureFitConfig, tabulated: TabulatedLighting | None = None):
+        """`tabulated`: the lighting already tabulated at these samples (else it is, here)."""
         self.samples = samples
-        self.light = TabulatedLighting(lighting, samples.normal, samples.view, config.lighting_levels)
+        self.light = tabulated if tabulated is not None else TabulatedLighting(lighting, samples.normal, samples.view,
+                                                                               config.lighting_levels)
         self.grid = (samples.uv * 2.0 - 1.0)[None, None]
         self.clip_level = config.clip_level
         self.use_colour(samples.colour)
@@ -362,7 +376,12 @@ def fit_textures(textures: BakedTextures, samples: PixelSamples, lighting, confi
         shift, steps, stopped = _register(shading, baked, config, prior, tick, should_stop)
         done = steps
     if searching and not stopped:
-        begin, prior, choice, taken, stopped = _search_metal(shading, baked, textures.base_color.shape[0], config,
+        search_shading = shading
+        if config.search_one_sample and samples.footprint > 1:
+            search_shading = _Shading(samples.one_sample(), lighting, config,
+                                      shading.light.rows(slice(None, None, samples.footprint)))
+            search_shading.use_colour(shading.colour)  # (the registered colours, when registered)
+        begin, prior, choice, taken, stopped = _search_metal(search_shading, baked, textures.base_color.shape[0], config,
                                                               tick, should_stop)
         steps += taken
         done = steps

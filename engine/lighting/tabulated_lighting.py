@@ -40,6 +40,14 @@ class TabulatedLighting:
         self.irradiance = torch.cat(irradiance) if irradiance else n.new_zeros((0, 3))
         self.specular = torch.cat(specular) if specular else n.new_zeros((0, levels, 3))  # (N, levels, 3)
 
+    def rows(self, index: torch.Tensor | slice) -> "TabulatedLighting":
+        """The tabulation of a subset of its pixels (`index` into them), without computing anything again."""
+        part = object.__new__(TabulatedLighting)
+        part.lighting, part.levels = self.lighting, self.levels
+        part.irradiance, part.specular = self.irradiance[index], self.specular[index]
+        part.count = part.irradiance.shape[0]
+        return part
+
     def _check(self, rows: int) -> None:
         if rows != self.count:
             raise ValueError(f"this lighting was tabulated for {self.count} pixels, not {rows}")

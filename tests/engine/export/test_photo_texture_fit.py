@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 import torch
 
 from lirm.engine.cameras import Camera, look_at
@@ -117,6 +118,16 @@ def test_the_metal_search_finds_metal_that_the_field_left_as_paint():
         searched.metallic[left].mean(), searched.metallic[right].mean())
     assert 0.35 < report.metal_share < 0.65 and "metal search" in report.summary()
     assert report.loss_after < 0.7 * plain_report.loss_after, (report.loss_after, plain_report.loss_after)
+    # With a footprint, the search may shade one sub-sample of each pixel (search_one_sample): here every
+    # pixel's four sub-samples are alike, so it chooses as the search over all of them does.
+    repeat = lambda t: t.repeat_interleave(4, 0)  # noqa: E731
+    footprint = PixelSamples(repeat(uv), repeat(normal), repeat(view), colour, footprint=4).subset(4000)
+    short = TextureFitConfig(search_steps=60, search_final_steps=60)
+    with torch.no_grad():
+        full, full_report = fit_textures(start, footprint, lighting, replace(short, search_one_sample=False))
+        one, one_report = fit_textures(start, footprint, lighting, replace(short, search_one_sample=True))
+    assert one_report.metal_share == pytest.approx(full_report.metal_share, abs=0.01) and one_report.metal_share > 0.3
+    np.testing.assert_allclose(one.metallic, full.metallic, atol=0.02)  # (float rounding, through Adam)
 
 
 def test_an_export_fitted_to_photos_of_a_checker_sphere_shows_the_checker(tmp_path, gl_context, renderer):

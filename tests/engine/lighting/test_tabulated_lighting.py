@@ -43,3 +43,16 @@ def test_gradients_reach_the_roughness_and_other_pixels_are_refused():
     assert roughness.grad is not None and roughness.grad.abs().sum() > 0
     with pytest.raises(ValueError, match="tabulated for 50 pixels"):
         table.irradiance_over_pi(normals[:10])
+
+
+def test_a_subset_of_its_rows_is_the_tabulation_of_those_pixels():
+    panorama = PanoramaLighting.from_environment(make_procedural_environment("studio", width=128), height=16)
+    normals, views = _pixels(60, seed=3)
+    table = TabulatedLighting(panorama, normals, views)
+    every_third = table.rows(slice(None, None, 3))
+    direct = TabulatedLighting(panorama, normals[::3], views[::3])
+    assert every_third.count == 20
+    torch.testing.assert_close(every_third.irradiance, direct.irradiance)
+    torch.testing.assert_close(every_third.specular, direct.specular)
+    with pytest.raises(ValueError, match="tabulated for 20 pixels"):
+        every_third.irradiance_over_pi(normals)
