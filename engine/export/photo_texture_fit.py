@@ -267,13 +267,17 @@ class _Shading:
     def use_colour(self, colour: torch.Tensor) -> None:
         """The photo colours (N, 3) the errors are measured against from now on (the registered ones)."""
         self.colour = colour
-        self.clipped = colour >= self.clip_level if self.clip_level is not None else None
+        self.clipped = self._clipped(colour)
+
+    def _clipped(self, colour: torch.Tensor) -> torch.Tensor | None:
+        """Which channels of `colour` are at the clip level (None: no clip level)."""
+        return colour >= self.clip_level if self.clip_level is not None else None
 
     def errors(self, albedo_logit: torch.Tensor, roughness_logit: torch.Tensor, metallic_logit: torch.Tensor,
                colour: torch.Tensor | None = None) -> torch.Tensor:
         """(N, 3) absolute display-value error per pixel and channel (against `colour`, or the colours in use)."""
         grid, samples = self.grid, self.samples
-        clipped = self.clipped if colour is None else (colour >= self.clip_level if self.clip_level is not None else None)
+        clipped = self.clipped if colour is None else self._clipped(colour)
         colour = self.colour if colour is None else colour
         shaded = shade(self.light, _lookup(torch.sigmoid(albedo_logit), grid), _lookup(torch.sigmoid(roughness_logit), grid)[:, 0],
                        _lookup(torch.sigmoid(metallic_logit), grid)[:, 0], samples.normal, samples.view).radiance
