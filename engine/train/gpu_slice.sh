@@ -40,16 +40,24 @@ if [ "${TIMINGS:-0}" = 1 ]; then
   timeout ${T_BENCH:-45} $lirm bench model --preset paper --device $device --updates 4 --no-baseline --image-size 256 --json /tmp/slice/bench_paper256.json
   timeout ${T_BENCH:-45} $lirm bench model --preset small --device $device --updates 4 --no-baseline --json /tmp/slice/bench_small.json
 fi
+# The training step itself (the slice's batch, both checkpointing settings, a profile): TRAIN_BENCH=1 (about 90 s).
+if [ "${TRAIN_BENCH:-0}" = 1 ]; then
+  timeout ${T_TRAIN_BENCH:-150} $lirm bench train --preset small --device $device --batch-scenes "${BATCH_SCENES:-16}" \
+    --checkpointing both --steps 2 --profile --json /tmp/slice/bench_train.json 2>&1 | grep -v USDT
+fi
 # One process's synthetic-scene rate on this machine's EGL (the training runs many such processes).
 timeout ${T_BENCH:-45} $lirm bench synth --scenes 6 --views 8 --size 256
 echo "[$(left) s left] timings done"
 
 resume=()
-views=()  # SCENE_VIEWS=N: fewer views rendered per scene (at least 12 in stage 1) where the data bounds the step
-[ -n "${SCENE_VIEWS:-}" ] && views=(--scene-views "$SCENE_VIEWS")
+# 12 views rendered per scene (stage 1's two update sets of up to 6; the trainer's default is 32) and 8
+# loader processes: the second slice's 14 processes rendering 32 views each kept the 16 cores busy while
+# the step's own process, which launches the GPU's kernels, needed one (3.37 s per step in training, 1.73 s
+# in `lirm bench train` on the same GPU with the data made beforehand). SCENE_VIEWS=32 gives the old data.
+views=(--scene-views "${SCENE_VIEWS:-12}")
 [ -f resources/checkpoints/lirm-small-resume.safetensors ] && resume=(--resume resources/checkpoints/lirm-small-resume.safetensors)
 $lirm train --preset "${PRESET:-small}" --stage 1 --stage-steps "${STAGE_STEPS:-3000}" --batch-scenes "${BATCH_SCENES:-16}" \
-  --workers "${WORKERS:-14}" --device $device --out /tmp/slice/run --checkpoint-every "${CHECKPOINT_EVERY:-100}" \
+  --workers "${WORKERS:-8}" --device $device --out /tmp/slice/run --checkpoint-every "${CHECKPOINT_EVERY:-100}" \
   --eval-every "${EVAL_EVERY:-100}" --eval-objects 2 --slim-copy /tmp/slice/slim.safetensors "${resume[@]}" "${views[@]}" &
 pid=$!
 # The deadline is kept whatever the trainer is doing: a first SIGINT (to the trainer alone) stops at

@@ -24,7 +24,6 @@ import logging
 import math
 import signal
 import time
-from contextlib import nullcontext
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable
@@ -47,6 +46,7 @@ from .perceptual import perceptual_loss
 from .scene_source import SceneSource
 from .stages import StageConfig, stage_config
 from .training_checkpoint import load_resume_point, restore_optimizer, save_slim_checkpoint, save_training_checkpoint
+from .train_step import train_step
 from .training_sample import make_sample
 
 log = logging.getLogger(__name__)
@@ -150,6 +150,15 @@ class TrainingStream(IterableDataset):
                               self.config.scene_pool)
 
 
+def _one_thread_per_worker(_worker_id: int) -> None:
+    """Each loader process renders on one thread: OpenCV would otherwise start a thread per core in
+    every one of them, and the step's own process, launching the GPU's kernels, would wait for a core."""
+    import cv2
+
+    cv2.setNumThreads(1)
+    torch.set_num_threads(1)
+
+
 @dataclass
 class TrainResult:
     out_dir: Path
@@ -250,7 +259,9 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
     if start_step > 0 and not moments_dropped:  # continuing: the moments must be there (restore_optimizer says so if not)
         restore_optimizer(optimizer, model, optimizer_state, config.resume)
     weights = replace(config.losses, numerical_normal=stage.numerical_normal_weight)
-    objective = TrainingObjective(model, weights, perceptual_loss(config.lpips)).to(device)
+    # On GPUs the crops' renders are recomputed in the backward pass: without it a `small` step of 16 scenes
+    # needs 110 GiB (objective.py).
+    objective = TrainingObjective(model, weights, perceptual_loss(config.lpips), render_checkpointing=cuda).to(device)
     if info.distributed:
         from torch.nn.parallel import DistributedDataParallel
 
@@ -260,7 +271,8 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
     scenes_here = max(1, stage.batch_scenes // info.world_size)
     source = SceneSource(config.scenes or scene_config_for(model.config.image_size), model.config.image_size, config.cache_dir)
     loader = DataLoader(TrainingStream(source, stage, start_step, end_step, info, scenes_here, config),
-                        batch_size=None, num_workers=config.workers, persistent_workers=False)
+                        batch_size=None, num_workers=config.workers, persistent_workers=False,
+                        worker_init_fn=_one_thread_per_worker)
     occupancy = OccupancyConfig(resolution=stage.occupancy_resolution) if stage.occupancy_grid else None
     run = {"config": config.to_dict(), "stage": stage.to_dict(), "generator_version": GENERATOR_VERSION,
            "world_size": info.world_size, "hardware": hardware_description(info),
@@ -307,19 +319,9 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
             render = VolumeRenderConfig(samples_per_ray=stage.samples_per_ray, beta=1.0 / inv_beta, stratified=True,
                                         numerical_normals=stage.numerical_normal_weight > 0)
             generator = torch.Generator(device).manual_seed(config.data_seed * 1_000_003 + step * 1009 + info.rank)
-            inputs = [tuple(t.to(device, non_blocking=True) for t in views) for views in sample.inputs]
-            targets = [[{k: v.to(device, non_blocking=True) for k, v in scene.items()} for scene in per_update]
-                       for per_update in sample.targets]
-            autocast = torch.autocast("cuda", dtype=torch.bfloat16) if cuda else nullcontext()
-            with autocast:
-                loss, terms = step_module(inputs, targets, sample.crop, render, occupancy, generator)
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
-            # Gradients are already averaged over processes, so every rank takes the same decision.
-            if torch.isfinite(loss) and torch.isfinite(grad_norm):
-                optimizer.step()
-            else:
+            outcome = train_step(step_module, model, optimizer, sample, render, occupancy, generator, device)
+            loss, terms, grad_norm = outcome.loss, outcome.terms, outcome.grad_norm
+            if not outcome.applied:
                 skipped += 1
                 if skipped > config.max_skipped_steps:
                     raise FloatingPointError(f"training diverged: {skipped} steps with non-finite loss or gradients "
