@@ -190,10 +190,13 @@ def mesh_for_rendering(uv_mesh: UVMesh, textures: BakedTextures):
                     material=material, name="export")
 
 
-def sample_photo_pixels(mesh, photos: PhotoViews, context, min_photo_alpha: float = 0.99, footprint: int = 1) -> PixelSamples:
+def sample_photo_pixels(mesh, photos: PhotoViews, context, min_photo_alpha: float = 0.99, footprint: int = 1,
+                        with_sources: bool = False) -> PixelSamples:
     """Rasterise `mesh` (MeshData) from every photo's camera and keep the pixels that both the render
     (fully covered, not an edge, a finite normal, in every sub-sample) and the photo's mask call
-    object; with `footprint` k, each pixel at k x k sub-samples (the camera scaled by k)."""
+    object; with `footprint` k, each pixel at k x k sub-samples (the camera scaled by k). With
+    `with_sources`, also where each pixel lies in its photo (only the registration reads it, and it
+    holds a copy of the photos)."""
     from lirm.renderer.environment import Environment
     from lirm.renderer.pbr_renderer import PBRRenderer, RenderSettings
 
@@ -224,8 +227,9 @@ def sample_photo_pixels(mesh, photos: PhotoViews, context, min_photo_alpha: floa
             normal.append(pixel_normal[use].reshape(-1, 3))
             view.append(-group(directions)[use].reshape(-1, 3))
             colour.append(np.asarray(image)[use])
-            rows, columns = np.nonzero(use)  # the same row-major order as the boolean selections above
-            pixel_xy.append(np.stack([columns + 0.5, rows + 0.5], -1))
+            if with_sources:
+                rows, columns = np.nonzero(use)  # the same row-major order as the boolean selections above
+                pixel_xy.append(np.stack([columns + 0.5, rows + 0.5], -1))
     finally:
         scene.release()
         lighting.maps.release()
@@ -235,7 +239,7 @@ def sample_photo_pixels(mesh, photos: PhotoViews, context, min_photo_alpha: floa
     n = as_tensor(normal, 3)
     n = n / n.norm(dim=-1, keepdim=True).clamp(min=1e-12)
     return PixelSamples(as_tensor(uv, 2), n, as_tensor(view, 3), as_tensor(colour, 3), footprint * footprint,
-                        photo_sources(pixel_xy, photos.images, photos.masks))
+                        photo_sources(pixel_xy, photos.images, photos.masks) if with_sources else None)
 
 
 METAL_HELD = (0.02, 0.98)  # the metallic the dielectric and metal hypotheses are held at (logits stay finite)
@@ -464,6 +468,6 @@ def fit_textures_to_photos(uv_mesh: UVMesh, textures: BakedTextures, photos: Pho
                            should_stop: Callable[[], bool] | None = None) -> tuple[BakedTextures, TextureFitReport]:
     """Rasterise the export from the photos' cameras (through `context`) and fit its textures to them."""
     samples = sample_photo_pixels(mesh_for_rendering(uv_mesh, textures), photos, context, config.min_photo_alpha,
-                                  config.footprint)
+                                  config.footprint, with_sources=config.register_grid > 0)
     samples = samples.subset(config.max_pixels, config.seed)
     return fit_textures(textures, samples, lighting, config, progress, should_stop, views=len(photos.cameras))

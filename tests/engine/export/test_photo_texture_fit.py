@@ -278,6 +278,10 @@ def test_footprint_samples_group_each_pixels_sub_samples(tmp_path, gl_context):
     four = sample_photo_pixels(mesh, photos, gl_context, footprint=2)
     assert four.footprint == 4 and four.uv.shape[0] == 4 * four.pixels and four.normal.shape[0] == 4 * four.pixels
     assert 0.8 * one.pixels < four.pixels <= one.pixels
+    # Where each pixel lies in its photo is recorded only when asked (the registration's input).
+    assert one.sources is None and four.sources is None
+    located = sample_photo_pixels(mesh, photos, gl_context, footprint=2, with_sources=True)
+    assert located.sources is not None and len(located.sources.xy) == located.pixels == four.pixels
     # A pixel's sub-samples look along nearly the same ray and land close together in the atlas.
     spread = (four.view.reshape(-1, 4, 3) - four.view.reshape(-1, 4, 3).mean(1, keepdim=True)).norm(dim=-1).max()
     assert spread < 0.05
