@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import torch
+from torch.autograd import DeviceType
 
 from lirm.engine.errors import LirmUsageError
 from lirm.engine.io.atomic_files import atomic_write_json
@@ -194,5 +195,7 @@ def _profile(result: TrainBenchResult, step, device: torch.device, rows: int) ->
     for event in averages:
         if event.key in PHASES:
             result.phases[event.key] = event.cpu_time_total / 1e6
-    operators = sorted((e for e in averages if e.key not in PHASES and own(e) > 0), key=own, reverse=True)[:rows]
+    # Operators only: on a GPU the kernels are listed as events of their own too, and would count twice.
+    operators = sorted((e for e in averages if e.key not in PHASES and own(e) > 0 and e.device_type == DeviceType.CPU),
+                       key=own, reverse=True)[:rows]
     result.top_operators = [{"name": e.key, "seconds": own(e) / 1e6, "calls": e.count} for e in operators]
