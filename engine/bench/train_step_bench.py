@@ -24,15 +24,14 @@ from lirm.engine.errors import LirmUsageError
 from lirm.engine.io.atomic_files import atomic_write_json
 from lirm.engine.model.config import preset as model_preset
 from lirm.engine.model.lirm import LIRM
-from lirm.engine.model.volume_renderer import VolumeRenderConfig
 from lirm.engine.model.occupancy_grid import OccupancyConfig
 from lirm.engine.train.losses import LossWeights
 from lirm.engine.train.objective import TrainingObjective
 from lirm.engine.train.perceptual import perceptual_loss
 from lirm.engine.train.scene_source import SceneSource
 from lirm.engine.train.stages import stage_config
-from lirm.engine.train.train_step import train_step
-from lirm.engine.train.trainer import scene_config_for
+from lirm.engine.train.train_step import train_step, training_optimizer, training_render
+from lirm.engine.train.trainer import check_scene_views, scene_config_for
 from lirm.engine.train.training_sample import make_sample
 
 from .model_bench import _device_name, _resolve_device, _sync
@@ -118,16 +117,15 @@ def run_train_bench(config: TrainBenchConfig, progress=None) -> TrainBenchResult
     stage = stage_config(config.preset, config.stage)
     batch = config.batch_scenes or stage.batch_scenes
     stage = replace(stage, batch_scenes=batch, samples_per_ray=config.samples_per_ray or stage.samples_per_ray)
-    needed_views = stage.update_sets * stage.views_per_set[1]
-    views = config.scene_views or needed_views
-    if views < needed_views:
-        raise LirmUsageError(f"--scene-views {views}: stage {config.stage} needs at least {needed_views} views per scene")
+    model_config = model_preset(config.preset)
+    scenes = replace(scene_config_for(model_config.image_size), views=config.scene_views or stage.views_per_scene)
+    check_scene_views(scenes, stage, config.stage)
     torch.manual_seed(0)
-    model = LIRM(model_preset(config.preset)).to(device).train()
-    say(f"rendering {batch} scenes of {views} views for the steps (not timed)")
+    model = LIRM(model_config).to(device).train()
+    say(f"rendering {batch} scenes of {scenes.views} views for the steps (not timed)")
     steps = config.warmup_steps + config.steps + (1 if config.profile else 0)
     with tempfile.TemporaryDirectory() as cache:
-        source = SceneSource(replace(scene_config_for(model.config.image_size), views=views), model.config.image_size, cache)
+        source = SceneSource(scenes, model_config.image_size, cache)
         start = time.perf_counter()
         # A pool of `batch` scenes, each rendered once and cached: every step draws its scenes from it.
         try:
@@ -141,9 +139,8 @@ def run_train_bench(config: TrainBenchConfig, progress=None) -> TrainBenchResult
                               data_seconds_per_scene=data_seconds)
     weights = replace(LossWeights(), numerical_normal=stage.numerical_normal_weight)
     objective = TrainingObjective(model, weights, perceptual_loss(False)).to(device)
-    optimizer = torch.optim.AdamW(model.parameters(), lr=1e-6, betas=(0.9, 0.95), weight_decay=0.05)
-    render = VolumeRenderConfig(samples_per_ray=stage.samples_per_ray, beta=1.0 / stage.inv_beta[0], stratified=True,
-                                numerical_normals=stage.numerical_normal_weight > 0)
+    optimizer = training_optimizer(model, 1e-6)  # a small rate: the timed steps barely move the weights
+    render = training_render(stage, stage.inv_beta[0])
     occupancy = OccupancyConfig(resolution=stage.occupancy_resolution) if stage.occupancy_grid else None
     settings = {"auto": [device.type == "cuda"], "on": [True], "off": [False], "both": [True, False]}[config.checkpointing]
     meter = PeakMemory(str(device))

@@ -39,6 +39,11 @@ class StageConfig:
     occupancy_grid: bool  # nerfacc-style empty-space skipping while rendering the crops
     occupancy_resolution: int = 250
 
+    @property
+    def views_per_scene(self) -> int:
+        """The views a scene must hold: every update set of a step draws its own."""
+        return self.update_sets * self.views_per_set[1]
+
     def to_dict(self) -> dict:
         return asdict(self)
 

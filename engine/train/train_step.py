@@ -13,7 +13,19 @@ import torch
 from lirm.engine.model.occupancy_grid import OccupancyConfig
 from lirm.engine.model.volume_renderer import VolumeRenderConfig
 
+from .stages import StageConfig
 from .training_sample import TrainingSample
+
+
+def training_optimizer(model: torch.nn.Module, learning_rate: float) -> torch.optim.AdamW:
+    # Weight decay as MeshLRM's; the paper gives only the betas.
+    return torch.optim.AdamW(model.parameters(), lr=learning_rate, betas=(0.9, 0.95), weight_decay=0.05)
+
+
+def training_render(stage: StageConfig, inv_beta: float) -> VolumeRenderConfig:
+    """How a step renders its crops: the stage's samples per ray, stratified, at the step's 1/beta."""
+    return VolumeRenderConfig(samples_per_ray=stage.samples_per_ray, beta=1.0 / inv_beta, stratified=True,
+                              numerical_normals=stage.numerical_normal_weight > 0)
 
 
 @dataclass

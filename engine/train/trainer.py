@@ -36,7 +36,6 @@ from lirm.engine.io.atomic_files import atomic_write, atomic_write_json
 from lirm.engine.model.config import preset as model_preset
 from lirm.engine.model.lirm import LIRM
 from lirm.engine.model.occupancy_grid import OccupancyConfig
-from lirm.engine.model.volume_renderer import VolumeRenderConfig
 from lirm.engine.synth.training_scenes import GENERATOR_VERSION, TrainingSceneConfig
 
 from .distributed import ProcessGroupInfo, any_process, hardware_description, init_process_group, mean_over_processes, shutdown
@@ -46,7 +45,7 @@ from .perceptual import perceptual_loss
 from .scene_source import SceneSource
 from .stages import StageConfig, stage_config
 from .training_checkpoint import load_resume_point, restore_optimizer, save_slim_checkpoint, save_training_checkpoint
-from .train_step import train_step
+from .train_step import train_step, training_optimizer, training_render
 from .training_sample import make_sample
 
 log = logging.getLogger(__name__)
@@ -232,12 +231,12 @@ def _prepare_model(config: TrainConfig, stage: StageConfig, info: ProcessGroupIn
     return model.train(), 0, {}, False
 
 
-def _check_scene_views(scenes: TrainingSceneConfig | None, stage: StageConfig, stage_number: int) -> None:
+def check_scene_views(scenes: TrainingSceneConfig | None, stage: StageConfig, stage_number: int) -> None:
     """Every update set of a step draws its own views of the scene, so a scene must hold them all;
     checked before anything is created or computed."""
     if scenes is None:
         return
-    needed = stage.update_sets * stage.views_per_set[1]
+    needed = stage.views_per_scene
     if scenes.views < needed:
         raise LirmUsageError(f"--scene-views {scenes.views}: stage {stage_number} feeds {stage.update_sets} update sets "
                              f"of up to {stage.views_per_set[1]} views, so each scene needs at least {needed}")
@@ -245,7 +244,7 @@ def _check_scene_views(scenes: TrainingSceneConfig | None, stage: StageConfig, s
 
 def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> TrainResult:
     stage = config.stage_settings()
-    _check_scene_views(config.scenes, stage, config.stage)
+    check_scene_views(config.scenes, stage, config.stage)
     out_dir = Path(config.out_dir)
     model, start_step, optimizer_state, moments_dropped = _prepare_model(config, stage, info)
     end_step = min(stage.steps, config.max_steps) if config.max_steps else stage.steps
@@ -255,7 +254,7 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
     model = model.to(device)
     cuda = device.type == "cuda"
     model.transformer.gradient_checkpointing = cuda  # memory for batch on GPUs; a CPU run is small anyway
-    optimizer = torch.optim.AdamW(model.parameters(), lr=stage.learning_rate[0], betas=(0.9, 0.95), weight_decay=0.05)  # decay as MeshLRM; the paper gives only the betas
+    optimizer = training_optimizer(model, stage.learning_rate[0])
     if start_step > 0 and not moments_dropped:  # continuing: the moments must be there (restore_optimizer says so if not)
         restore_optimizer(optimizer, model, optimizer_state, config.resume)
     weights = replace(config.losses, numerical_normal=stage.numerical_normal_weight)
@@ -316,8 +315,7 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
             for group in optimizer.param_groups:
                 group["lr"] = lr
             inv_beta = inverse_beta(stage, step)
-            render = VolumeRenderConfig(samples_per_ray=stage.samples_per_ray, beta=1.0 / inv_beta, stratified=True,
-                                        numerical_normals=stage.numerical_normal_weight > 0)
+            render = training_render(stage, inv_beta)
             generator = torch.Generator(device).manual_seed(config.data_seed * 1_000_003 + step * 1009 + info.rank)
             outcome = train_step(step_module, model, optimizer, sample, render, occupancy, generator, device)
             loss, terms, grad_norm = outcome.loss, outcome.terms, outcome.grad_norm
