@@ -124,8 +124,12 @@ class StopRequests:
 
     def __init__(self) -> None:
         self.requested = False
+        self.closing = False  # the run is writing what it leaves behind: a further Ctrl-C must not cut that short
 
     def __call__(self, *_signal) -> None:
+        if self.closing:
+            log.warning("already stopping: writing the slim copy and the loss curves first")
+            return
         if self.requested:
             raise KeyboardInterrupt("second stop request: interrupting the step")
         self.requested = True
@@ -353,20 +357,25 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
                 break
             data_start = time.perf_counter()
     finally:
-        if previous_handler is not None:
-            signal.signal(signal.SIGINT, previous_handler)
-        if writer is not None:
-            writer.close()
-        if info.is_main and config.slim_copy and history:
-            if history[-1]["step"] != slim_step:  # a run ending on a checkpoint wrote it there already
-                save_slim_checkpoint(Path(config.slim_copy), model, config.stage, history[-1]["step"], run)
-            log.info("slim checkpoint (float16, no moments) of step %d written to %s", history[-1]["step"], config.slim_copy)
-        if info.is_main and (out_dir / "metrics.csv").is_file():
-            from .loss_curve import write_loss_curves
+        # The handler stays until the end: a Ctrl-C that lands here (the first one's step may just have
+        # ended) is logged, not raised, so the slim copy a GPU slice depends on is still written.
+        stop.closing = True
+        try:
+            if writer is not None:
+                writer.close()
+            if info.is_main and config.slim_copy and history:
+                if history[-1]["step"] != slim_step:  # a run ending on a checkpoint wrote it there already
+                    save_slim_checkpoint(Path(config.slim_copy), model, config.stage, history[-1]["step"], run)
+                log.info("slim checkpoint (float16, no moments) of step %d written to %s", history[-1]["step"], config.slim_copy)
+            if info.is_main and (out_dir / "metrics.csv").is_file():
+                from .loss_curve import write_loss_curves
 
-            write_loss_curves(out_dir / "metrics.csv", out_dir / "loss_curves.png",
-                              title=f"{config.preset} stage {config.stage}: loss terms per step (log scale)")
-        source.release()
+                write_loss_curves(out_dir / "metrics.csv", out_dir / "loss_curves.png",
+                                  title=f"{config.preset} stage {config.stage}: loss terms per step (log scale)")
+            source.release()
+        finally:
+            if previous_handler is not None:
+                signal.signal(signal.SIGINT, previous_handler)
     return TrainResult(out_dir, config.stage, start_step, history[-1]["step"] if history else start_step, history,
                        stopped_early, checkpoint)
 

@@ -201,6 +201,20 @@ def test_a_second_ctrl_c_stops_at_once_and_still_writes_the_slim_copy(tmp_path, 
     assert extra["training"]["step"] == done and done < 40
 
 
+def test_a_ctrl_c_while_the_run_writes_its_slim_copy_does_not_cut_it_short():
+    # The race behind a lost slim copy: the first Ctrl-C's step ends just before the second arrives, so
+    # the second lands while the run writes what it leaves behind.
+    from lirm.engine.train.trainer import StopRequests
+
+    stop = StopRequests()
+    stop()
+    assert stop.requested
+    with pytest.raises(KeyboardInterrupt):
+        stop()
+    stop.closing = True
+    stop()  # logged, not raised
+
+
 def test_the_trainer_itself_refuses_scenes_too_small_for_the_update_sets(tmp_path, cache):
     from lirm.engine.errors import LirmUsageError
 
