@@ -7,13 +7,47 @@ prefiltered specular at `levels` evenly spaced roughness values, interpolated li
 (as the renderer's mip chain interpolates between its prefiltered levels). Each fitting step then
 costs a gather instead of the panorama's full lobe sum over every texel.
 
+A fittable panorama's terms are first computed on a fine equirectangular grid of directions (8 x the
+panorama's resolution) and read from it per pixel: its lobes are never narrower than one of its own
+texels, so the grid resolves them (within a fraction of a per cent; tested), and computing the lobe
+sums for a million photo pixels directly took 85 s of the demo's 171 s texture fit.
+
 It keeps `split_sum_shading.shade`'s lighting interface; the directions `shade` passes are ignored
 (they are the tabulated ones), so it must be called on exactly the pixels it was built for.
 """
 
 from __future__ import annotations
 
+import numpy as np
 import torch
+
+from lirm.renderer.environment import Environment
+
+from .panorama_lighting import PanoramaLighting
+from .split_sum_shading import equirect_lookup
+
+# Directions per panorama texel side on the grid a panorama's terms are computed on first.
+PANORAMA_GRID_FACTOR = 8
+
+
+class _OnDirectionGrid:
+    """A panorama's irradiance and prefiltered specular computed once per roughness level on a grid of
+    directions, then read bilinearly (the renderer reads its prefiltered maps the same way)."""
+
+    def __init__(self, lighting: PanoramaLighting, roughness_levels: torch.Tensor):
+        height = int(lighting.log_radiance.shape[0]) * PANORAMA_GRID_FACTOR
+        directions, _ = Environment(np.zeros((height, 2 * height, 3), np.float32)).texel_directions()
+        grid = torch.from_numpy(directions.reshape(-1, 3)).to(roughness_levels)
+        self.irradiance = lighting.irradiance_over_pi(grid).reshape(height, 2 * height, 3)
+        self.specular = [lighting.prefiltered(grid, torch.full((grid.shape[0],), float(r), dtype=grid.dtype,
+                                                               device=grid.device)).reshape(height, 2 * height, 3)
+                         for r in roughness_levels]
+
+    def irradiance_over_pi(self, normals: torch.Tensor) -> torch.Tensor:
+        return equirect_lookup(self.irradiance, normals)
+
+    def prefiltered_levels(self, reflected: torch.Tensor) -> torch.Tensor:
+        return torch.stack([equirect_lookup(level, reflected) for level in self.specular], dim=1)
 
 
 class TabulatedLighting:
@@ -31,8 +65,13 @@ class TabulatedLighting:
         roughness_levels = torch.linspace(0.0, 1.0, levels, dtype=n.dtype, device=n.device)
         irradiance, specular = [], []
         with torch.no_grad():
+            grid = _OnDirectionGrid(lighting, roughness_levels) if isinstance(lighting, PanoramaLighting) else None
             for start in range(0, self.count, chunk):
                 part_n, part_r = n[start:start + chunk], reflected[start:start + chunk]
+                if grid is not None:
+                    irradiance.append(grid.irradiance_over_pi(part_n))
+                    specular.append(grid.prefiltered_levels(part_r))
+                    continue
                 irradiance.append(lighting.irradiance_over_pi(part_n))
                 specular.append(torch.stack([lighting.prefiltered(part_r, torch.full((part_r.shape[0],), float(r), dtype=n.dtype,
                                                                                      device=n.device))
