@@ -16,6 +16,7 @@ class LossWeights:
     mask: float = 0.1  # binary cross-entropy of the opacity against the mask
     eikonal: float = 0.05  # (|grad s| - 1)^2 at points near the surface
     curvature: float = 0.2  # 1 - cos between the SDF's normals a short step apart (objective.CURVATURE_STEP)
+    curvature_step: float = 0.01  # that step's spread, in bounding radii (objective.CURVATURE_STEP: about a pixel at 128 px)
     normal: float = 0.02  # the MLP normal against the SDF's numerical normal (the paper's stage-3 term)
     albedo: float = 0.1  # albedo against the linearised observed colour (stand-in for inverse rendering)
     material_prior: float = 0.01  # roughness toward 0.5 and metallic toward 0 where nothing else says otherwise

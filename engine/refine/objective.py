@@ -83,7 +83,7 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
         if weights.curvature:
             # The surface's normal should change little over a short step: lumps a few views cannot
             # see (they cost the relighting, where every bump catches the new light) are flattened.
-            step = torch.randn(points.shape[0], 3, generator=generator).to(points) * CURVATURE_STEP * field.radius
+            step = torch.randn(points.shape[0], 3, generator=generator).to(points) * weights.curvature_step * field.radius
             nearby = sdf_gradients(field, points + step, 0.5 * field.normal_eps)
             here = gradient[: points.shape[0]]
             terms["curvature"] = (1.0 - F.cosine_similarity(here, nearby, dim=-1)).mean()

@@ -77,6 +77,29 @@ def test_the_curvature_term_sees_bumps_and_not_a_smooth_sphere():
     assert curvature["smooth"] < 1e-3 and curvature["bumpy"] > 10 * max(curvature["smooth"], 1e-4), curvature
 
 
+def test_the_curvature_step_sets_the_scale_of_the_bends_it_sees():
+    # On a sphere the normals a step d apart differ by about d / r, and 1 - cos by (d / r)^2 / 2: a
+    # three times longer step sees a bend nine times as large (lumps wider than a pixel are priced).
+    from lirm.engine.model.analytic_fields import SphereField
+    from lirm.engine.refine.config import LossWeights
+    from lirm.engine.refine.objective import batch_loss
+    from lirm.engine.refine.ray_rendering import RayBatchRender
+
+    g = torch.Generator().manual_seed(0)
+    on_sphere = 0.5 * torch.nn.functional.normalize(torch.randn(2048, 3, generator=g), dim=-1)
+    n = 8
+    render = RayBatchRender(torch.ones(n, 3), torch.ones(n), torch.zeros(n, 3), torch.zeros(n), torch.zeros(n),
+                            torch.zeros(n, 3), torch.zeros(n), on_sphere, 0)
+    curvature = {}
+    for step in (0.01, 0.03):
+        weights = LossWeights(colour=0.0, mask=0.0, eikonal=0.0, normal=0.0, albedo=0.0, material_prior=0.0,
+                              curvature=1.0, curvature_step=step)
+        _, terms = batch_loss(SphereField(0.5), render, torch.ones(n, 3), torch.ones(n), weights, 2048,
+                              torch.Generator().manual_seed(1))
+        curvature[step] = terms["curvature"]
+    assert 6.0 < curvature[0.03] / curvature[0.01] < 12.0, curvature
+
+
 def _pair_render(albedo: torch.Tensor):
     from lirm.engine.refine.ray_rendering import RayBatchRender
 
