@@ -189,6 +189,9 @@ def test_a_second_ctrl_c_stops_at_once_and_still_writes_the_slim_copy(tmp_path, 
         while not (out / "metrics.csv").is_file() or len(_csv(out / "metrics.csv")) < 1:
             assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()[-3000:] if proc.poll() is not None else "no step"
             time.sleep(0.2)
+        # Past the end of step 1's bookkeeping and well inside step 2: a first request landing between
+        # step 1's metrics row and its stop check would end the run there, before the second arrives.
+        time.sleep(0.5)
         proc.send_signal(signal.SIGINT)
         time.sleep(0.1)
         proc.send_signal(signal.SIGINT)  # the second stops the step where it is
