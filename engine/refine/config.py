@@ -10,13 +10,16 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, replace
 
 
+CURVATURE_STEP = 0.01  # of the bounding radius: about a pixel's footprint at the protocol's 128 px
+
+
 @dataclass(frozen=True)
 class LossWeights:
     colour: float = 1.0  # L1 on the radiance over white, against the masked photo
     mask: float = 0.1  # binary cross-entropy of the opacity against the mask
     eikonal: float = 0.05  # (|grad s| - 1)^2 at points near the surface
     curvature: float = 0.2  # 1 - cos between the SDF's normals a short step apart (curvature_step)
-    curvature_step: float = 0.01  # that step's spread, in bounding radii (objective.CURVATURE_STEP: about a pixel at 128 px)
+    curvature_step: float = CURVATURE_STEP  # that step's spread, in bounding radii
     normal: float = 0.02  # the MLP normal against the SDF's numerical normal (the paper's stage-3 term)
     albedo: float = 0.1  # albedo against the linearised observed colour (stand-in for inverse rendering)
     material_prior: float = 0.01  # roughness toward 0.5 and metallic toward 0 where nothing else says otherwise

@@ -13,13 +13,12 @@ from lirm.engine.lighting.camera_response import display_to_radiance_torch, radi
 from lirm.engine.lighting.split_sum_shading import shade
 
 from .albedo_smoothness import albedo_difference
-from .config import LossWeights
+from .config import CURVATURE_STEP, LossWeights
 from .ray_rendering import RayBatchRender
 from .shared_materials import ALBEDO_SIGMA, shared_material_loss
 from .unshaded_albedo import normal_explained_albedo
 
 
-CURVATURE_STEP = 0.01  # of the bounding radius: about a pixel's footprint at the protocol's 128 px
 VOLUME_BAND = 0.02  # of the bounding radius: the soft step of the volume term (its push acts within this of the surface)
 
 

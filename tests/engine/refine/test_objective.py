@@ -54,26 +54,31 @@ def test_baked_shading_is_removed_and_clipped_pixels_left_out():
     torch.testing.assert_close(target[0], target[1], atol=0.01, rtol=0)
 
 
-def test_the_curvature_term_sees_bumps_and_not_a_smooth_sphere():
-    from lirm.engine.model.analytic_fields import SphereField
+def _curvature_term(field, points: int, step: float = 0.01) -> float:
+    """The refinement's curvature term alone, at `points` surface points of a sphere of radius 0.5."""
     from lirm.engine.refine.config import LossWeights
     from lirm.engine.refine.objective import batch_loss
     from lirm.engine.refine.ray_rendering import RayBatchRender
+
+    g = torch.Generator().manual_seed(0)
+    on_sphere = 0.5 * torch.nn.functional.normalize(torch.randn(points, 3, generator=g), dim=-1)
+    n = 8
+    render = RayBatchRender(torch.ones(n, 3), torch.ones(n), torch.zeros(n, 3), torch.zeros(n), torch.zeros(n),
+                            torch.zeros(n, 3), torch.zeros(n), on_sphere, 0)
+    weights = LossWeights(colour=0.0, mask=0.0, eikonal=0.0, normal=0.0, albedo=0.0, material_prior=0.0,
+                          curvature=1.0, curvature_step=step)
+    _, terms = batch_loss(field, render, torch.ones(n, 3), torch.ones(n), weights, points, torch.Generator().manual_seed(1))
+    return terms["curvature"]
+
+
+def test_the_curvature_term_sees_bumps_and_not_a_smooth_sphere():
+    from lirm.engine.model.analytic_fields import SphereField
 
     class Bumpy(SphereField):
         def sdf(self, points):
             return super().sdf(points) + 0.01 * torch.sin(60.0 * points).prod(-1)
 
-    g = torch.Generator().manual_seed(0)
-    on_sphere = 0.5 * torch.nn.functional.normalize(torch.randn(256, 3, generator=g), dim=-1)
-    n = 8
-    render = RayBatchRender(torch.ones(n, 3), torch.ones(n), torch.zeros(n, 3), torch.zeros(n), torch.zeros(n),
-                            torch.zeros(n, 3), torch.zeros(n), on_sphere, 0)
-    weights = LossWeights(colour=0.0, mask=0.0, eikonal=0.0, normal=0.0, albedo=0.0, material_prior=0.0, curvature=1.0)
-    curvature = {}
-    for name, field in (("smooth", SphereField(0.5)), ("bumpy", Bumpy(0.5))):
-        _, terms = batch_loss(field, render, torch.ones(n, 3), torch.ones(n), weights, 256, torch.Generator().manual_seed(1))
-        curvature[name] = terms["curvature"]
+    curvature = {name: _curvature_term(field, 256) for name, field in (("smooth", SphereField(0.5)), ("bumpy", Bumpy(0.5)))}
     assert curvature["smooth"] < 1e-3 and curvature["bumpy"] > 10 * max(curvature["smooth"], 1e-4), curvature
 
 
@@ -81,22 +86,8 @@ def test_the_curvature_step_sets_the_scale_of_the_bends_it_sees():
     # On a sphere the normals a step d apart differ by about d / r, and 1 - cos by (d / r)^2 / 2: a
     # three times longer step sees a bend nine times as large (lumps wider than a pixel are priced).
     from lirm.engine.model.analytic_fields import SphereField
-    from lirm.engine.refine.config import LossWeights
-    from lirm.engine.refine.objective import batch_loss
-    from lirm.engine.refine.ray_rendering import RayBatchRender
 
-    g = torch.Generator().manual_seed(0)
-    on_sphere = 0.5 * torch.nn.functional.normalize(torch.randn(2048, 3, generator=g), dim=-1)
-    n = 8
-    render = RayBatchRender(torch.ones(n, 3), torch.ones(n), torch.zeros(n, 3), torch.zeros(n), torch.zeros(n),
-                            torch.zeros(n, 3), torch.zeros(n), on_sphere, 0)
-    curvature = {}
-    for step in (0.01, 0.03):
-        weights = LossWeights(colour=0.0, mask=0.0, eikonal=0.0, normal=0.0, albedo=0.0, material_prior=0.0,
-                              curvature=1.0, curvature_step=step)
-        _, terms = batch_loss(SphereField(0.5), render, torch.ones(n, 3), torch.ones(n), weights, 2048,
-                              torch.Generator().manual_seed(1))
-        curvature[step] = terms["curvature"]
+    curvature = {step: _curvature_term(SphereField(0.5), 2048, step) for step in (0.01, 0.03)}
     assert 6.0 < curvature[0.03] / curvature[0.01] < 12.0, curvature
 
 
