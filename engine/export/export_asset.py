@@ -111,6 +111,10 @@ def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig()
                 uv_mesh, textures, photos, lighting, ctx, config.texture_fit,
                 progress=(lambda message, k, n: progress(message, 4, steps)) if progress else None, should_stop=should_stop)
             seconds["texture_fit"] = time.perf_counter() - t
+            if fit_report.surface_heights is not None:
+                from .surface_heights import displaced
+
+                uv_mesh = displaced(uv_mesh, fit_report.surface_heights)
     finally:
         if context is None:
             ctx.release()

@@ -35,9 +35,13 @@ class PhotoSources:
     view: torch.Tensor  # (N,) int64: which photo
     images: torch.Tensor  # (V, H, W, 3) the photos' display sRGB
     masks: torch.Tensor  # (V, H, W) the photos' object masks
+    # (N, 2) how far (pixels) the pixel's surface point moves in its photo per unit it is raised along
+    # the surface's normal (surface_heights.py; None: not recorded)
+    parallax: torch.Tensor | None = None
 
     def subset(self, keep: torch.Tensor) -> "PhotoSources":
-        return PhotoSources(self.xy[keep], self.view[keep], self.images, self.masks)
+        return PhotoSources(self.xy[keep], self.view[keep], self.images, self.masks,
+                            None if self.parallax is None else self.parallax[keep])
 
     @property
     def views(self) -> int:
@@ -101,9 +105,14 @@ def read_photos(sources: PhotoSources, offsets: torch.Tensor | None = None) -> t
     return read[:, :3], read[:, 3]
 
 
-def photo_sources(pixel_xy: list[np.ndarray], images: np.ndarray, masks: np.ndarray) -> PhotoSources:
-    """PhotoSources from each photo's kept pixels' (x, y) centres (a list over the photos)."""
+def photo_sources(pixel_xy: list[np.ndarray], images: np.ndarray, masks: np.ndarray,
+                  parallax: list[np.ndarray] | None = None) -> PhotoSources:
+    """PhotoSources from each photo's kept pixels' (x, y) centres (a list over the photos), and
+    optionally their parallax (a list of (n, 2) arrays, the same order)."""
     xy = np.concatenate(pixel_xy).astype(np.float32) if pixel_xy else np.zeros((0, 2), np.float32)
     view = np.concatenate([np.full(len(p), i, np.int64) for i, p in enumerate(pixel_xy)]) if pixel_xy else np.zeros(0, np.int64)
+    moves = None
+    if parallax is not None:
+        moves = torch.from_numpy(np.concatenate(parallax).astype(np.float32) if parallax else np.zeros((0, 2), np.float32))
     return PhotoSources(torch.from_numpy(xy), torch.from_numpy(view),
-                        torch.from_numpy(np.asarray(images, np.float32)), torch.from_numpy(np.asarray(masks, np.float32)))
+                        torch.from_numpy(np.asarray(images, np.float32)), torch.from_numpy(np.asarray(masks, np.float32)), moves)

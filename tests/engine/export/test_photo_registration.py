@@ -45,10 +45,13 @@ def test_a_photos_warp_moves_only_its_own_pixels():
     assert float(colour[first].max()) == 0.0  # pushed to its own right edge, not into the second photo
 
 
-def _shifted_views(shifts: np.ndarray, size: int = 48, period: float = 6.0):
+def _shifted_views(shifts: np.ndarray, size: int = 48, period: float = 6.0, heights=None):
     """Photos of a flat sinusoid-patterned texture seen face on, one texel per pixel, each displaced by
     its own shift (pixels); the samples map each pixel to the texel it would see without the shift
-    (as a reconstruction a little off would)."""
+    (as a reconstruction a little off would). With `heights` (a function of the texture coordinates
+    (x, y) / size), each shift is instead the photo's parallax: the texture truly lies that high
+    above the samples' surface, and a photo shows the texel at (x, y) moved by height x parallax (the
+    samples record each pixel's parallax)."""
     lighting = PanoramaLighting.from_environment(make_procedural_environment("studio", width=64), height=8)
     normal = torch.tensor([[0.0, 0.0, 1.0]])
 
@@ -65,10 +68,12 @@ def _shifted_views(shifts: np.ndarray, size: int = 48, period: float = 6.0):
 
     centre = np.arange(size) + 0.5
     x, y = np.meshgrid(centre, centre)
-    images = np.stack([display(albedo(x - dx, y - dy)) for dx, dy in shifts])
+    lift = np.ones_like(x) if heights is None else heights(x / size, y / size)
+    images = np.stack([display(albedo(x - lift * dx, y - lift * dy)) for dx, dy in shifts])
     inner = (x > 6) & (x < size - 6) & (y > 6) & (y < size - 6)
     xy = np.stack([x[inner], y[inner]], -1)
-    sources = photo_sources([xy] * len(shifts), images, np.ones(images.shape[:3], np.float32))
+    parallax = None if heights is None else [np.tile(shift, (len(xy), 1)) for shift in shifts]
+    sources = photo_sources([xy] * len(shifts), images, np.ones(images.shape[:3], np.float32), parallax)
     count = len(sources.xy)
     uv = sources.xy / size
     n = normal.expand(count, 3).contiguous()
@@ -85,7 +90,7 @@ def test_registration_undoes_each_photos_shift_and_keeps_the_textures_detail():
     shifts = np.array([[1.2, -0.6], [-1.0, 0.9], [0.4, 1.3], [-0.6, -1.6]], np.float32)
     shifts -= shifts.mean(0)  # a shift all photos share is the texture's, not theirs
     samples, lighting, start, truth, inner = _shifted_views(shifts)
-    plain = TextureFitConfig(steps=300, learning_rate=0.05, metal_search=False, fit_materials=False)
+    plain = TextureFitConfig(steps=300, learning_rate=0.05, metal_search=False, fit_materials=False, register_heights=0)
     registered = TextureFitConfig(steps=300, learning_rate=0.05, metal_search=False, fit_materials=False, register_grid=2,
                                   register_steps=300, register_learning_rate=0.05)
     with torch.no_grad():  # as the evaluation calls it: the fit makes its own gradients
@@ -110,3 +115,26 @@ def test_registration_needs_each_pixels_place_in_its_photo():
     with pytest.raises(ValueError, match="register_grid"):
         TextureFitConfig(register_grid=1)
     assert isinstance(samples.subset(10).sources, PhotoSources) and len(samples.subset(10).sources.xy) == 10
+
+
+def test_heights_over_the_surface_undo_a_parallax_that_changes_over_it():
+    """The texture lies above the samples' surface by a height that varies across it (one bump), so
+    each photo sees it displaced by height x its own parallax: no smooth warp per photo undoes that,
+    one height map shared by the photos does (surface_heights.py)."""
+    def bump(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return 1.2 * np.cos(np.pi * (u - 0.5)) * np.cos(np.pi * (v - 0.5)) - 0.4
+
+    parallax = np.array([[1.5, 0.0], [-1.5, 0.0], [0.0, 1.5], [0.0, -1.5]], np.float32)
+    samples, lighting, start, truth, inner = _shifted_views(parallax, heights=bump)
+    plain = TextureFitConfig(steps=300, learning_rate=0.05, metal_search=False, fit_materials=False, register_heights=0)
+    lifted = TextureFitConfig(steps=300, learning_rate=0.05, metal_search=False, fit_materials=False, register_heights=8,
+                              register_max_height=2.0, register_steps=300, height_learning_rate=0.05, height_smooth=0.01)
+    with torch.no_grad():
+        blurred, _ = fit_textures(start, samples, lighting, plain, views=len(parallax))
+        sharp, report = fit_textures(start, samples, lighting, lifted, views=len(parallax))
+    assert "photos registered" in report.summary() and report.registration_shift > 0.5
+
+    def error(textures: BakedTextures) -> float:
+        return float(np.abs(textures.base_color - truth)[inner].mean())
+
+    assert error(sharp) < 0.5 * error(blurred), (error(sharp), error(blurred))

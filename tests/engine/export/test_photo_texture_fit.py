@@ -60,7 +60,7 @@ def test_fitting_recovers_the_albedo_the_pixels_were_shaded_with():
                           np.ones((size, size), bool))
     with torch.no_grad():  # as the evaluation calls it: the fit makes its own gradients
         fitted, report = fit_textures(start, PixelSamples(uv, normal, view, colour), lighting,
-                                      TextureFitConfig(steps=300, learning_rate=0.05, metal_search=False))
+                                      TextureFitConfig(steps=300, learning_rate=0.05, metal_search=False, register_heights=0))
     assert report.pixels == count and report.steps == 300 and report.loss_after < 0.2 * report.loss_before
     seen = (slice(1, size // 2 - 1), slice(1, size // 2 - 1))
     error_before = np.abs(start.base_color[seen] - truth.numpy()[seen]).mean()
@@ -75,7 +75,7 @@ def test_fitting_recovers_the_albedo_the_pixels_were_shaded_with():
     assert part.uv.shape == (500, 2) and torch.equal(part.colour, samples.subset(500, seed=3).colour)
     # Stopped before its first step, it keeps what it had.
     for search in (False, True):
-        kept, report = fit_textures(start, PixelSamples(uv, normal, view, colour), lighting, TextureFitConfig(metal_search=search),
+        kept, report = fit_textures(start, PixelSamples(uv, normal, view, colour), lighting, TextureFitConfig(metal_search=search, register_heights=0),
                                     should_stop=lambda: True)
         assert report.stopped and report.steps == 0
         np.testing.assert_allclose(kept.base_color, start.base_color, atol=1e-3)
@@ -110,8 +110,8 @@ def test_the_metal_search_finds_metal_that_the_field_left_as_paint():
     samples = PixelSamples(uv, normal, view, colour)
     left, right = (slice(2, size - 2), slice(1, size // 2 - 2)), (slice(2, size - 2), slice(size // 2 + 2, size - 1))
     with torch.no_grad():
-        plain, plain_report = fit_textures(start, samples, lighting, TextureFitConfig(metal_search=False))
-        searched, report = fit_textures(start, samples, lighting, TextureFitConfig(metal_search=True))
+        plain, plain_report = fit_textures(start, samples, lighting, TextureFitConfig(metal_search=False, register_heights=0))
+        searched, report = fit_textures(start, samples, lighting, TextureFitConfig(metal_search=True, register_heights=0))
     assert plain_report.metal_share is None and "metal search" not in plain_report.summary()
     assert plain.metallic[left].mean() < 0.3, plain.metallic[left].mean()
     assert searched.metallic[left].mean() > 0.7 and searched.metallic[right].mean() < 0.3, (
@@ -122,7 +122,7 @@ def test_the_metal_search_finds_metal_that_the_field_left_as_paint():
     # pixel's four sub-samples are alike, so it chooses as the search over all of them does.
     repeat = lambda t: t.repeat_interleave(4, 0)  # noqa: E731
     footprint = PixelSamples(repeat(uv), repeat(normal), repeat(view), colour, footprint=4).subset(4000)
-    short = TextureFitConfig(search_steps=60, search_final_steps=60)
+    short = TextureFitConfig(search_steps=60, search_final_steps=60, register_heights=0)
     with torch.no_grad():
         full, full_report = fit_textures(start, footprint, lighting, replace(short, search_one_sample=False))
         one, one_report = fit_textures(start, footprint, lighting, replace(short, search_one_sample=True))
@@ -191,7 +191,7 @@ def test_a_clipped_photo_pixel_is_only_a_lower_bound():
                              np.zeros((size, size), np.float32), np.tile(np.float32([0, 0, 1]), (size, size, 1)),
                              np.ones((size, size), bool))
 
-    config = TextureFitConfig(steps=50, learning_rate=0.05, fit_materials=False)
+    config = TextureFitConfig(steps=50, learning_rate=0.05, fit_materials=False, register_heights=0)
     kept, report = fit_textures(start(0.9), samples, lighting, config)
     assert report.loss_before == 0.0
     np.testing.assert_allclose(kept.base_color, 0.9, atol=2e-3)
@@ -246,7 +246,7 @@ def test_a_pixel_footprint_fit_recovers_detail_finer_than_a_pixel():
     start = BakedTextures(np.full((size, size, 3), 0.45, np.float32), np.full((size, size), 0.6, np.float32),
                           np.zeros((size, size), np.float32), np.tile(np.float32([0, 0, 1]), (size, size, 1)),
                           np.ones((size, size), bool))
-    config = TextureFitConfig(steps=400, learning_rate=0.05, metal_search=False, fit_materials=False)
+    config = TextureFitConfig(steps=400, learning_rate=0.05, metal_search=False, fit_materials=False, register_heights=0)
     footprint = PixelSamples(uv, normal, view, colour, footprint=9)
     centre = PixelSamples(uv[4::9], normal[::9], view[::9], colour)  # one point at each pixel's centre
     assert footprint.pixels == centre.pixels == count and torch.equal(footprint.pixel_uv, uv[::9])
@@ -285,3 +285,21 @@ def test_footprint_samples_group_each_pixels_sub_samples(tmp_path, gl_context):
     # A pixel's sub-samples look along nearly the same ray and land close together in the atlas.
     spread = (four.view.reshape(-1, 4, 3) - four.view.reshape(-1, 4, 3).mean(1, keepdim=True)).norm(dim=-1).max()
     assert spread < 0.05
+
+
+def test_each_pixels_parallax_is_how_far_its_point_moves_when_raised_along_the_normal(gl_context):
+    """A plane seen face on from 2 units away: raising a point toward the camera magnifies it about
+    the image centre, so a pixel at (x, y) moves by ((x, y) - centre) / 2 per unit of height
+    (surface_heights.py reads the photos there)."""
+    from lirm.renderer.mesh import MeshData
+
+    positions = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float32)
+    mesh = MeshData(positions, np.array([[0, 1, 2], [0, 2, 3]]), normals=np.tile(np.float32([0, 0, 1]), (4, 1)),
+                    uvs=np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32))
+    camera = Camera.from_fov(32, 32, 40.0, look_at((0.0, 0.0, 2.0), (0, 0, 0), up=(0, 1, 0)))
+    photos = PhotoViews([camera], np.full((1, 32, 32, 3), 0.5, np.float32), np.ones((1, 32, 32), np.float32))
+    for footprint in (1, 2):
+        sources = sample_photo_pixels(mesh, photos, gl_context, footprint=footprint, with_sources=True).sources
+        assert len(sources.xy) > 500
+        expected = (sources.xy - torch.tensor([camera.cx, camera.cy], dtype=torch.float32)) / 2.0
+        assert float((sources.parallax - expected).abs().max()) < 0.05, footprint
