@@ -16,6 +16,10 @@ prefiltered tables) with parts exchanged between the two G-buffers pixel for pix
 
 Each is scored as the relighting test scores (relight_metrics: PSNR-L and PSNR-H on Stanford-ORB's
 pixels, after the per-channel scale). A study, not a method: it reads the truth's materials.
+
+Beside it, `exported_material_scores`: the export's own albedo, roughness and metallic against the
+truth's in the same G-buffers (what a user gets, where the evaluation's material PSNRs score the
+refined field's volume rendering, before the export's texture fit).
 """
 
 from __future__ import annotations
@@ -25,9 +29,11 @@ import numpy as np
 import torch
 
 from lirm.engine.lighting.split_sum_shading import shade
+from lirm.engine.metrics import psnr, scaled_albedo_psnr
 from lirm.renderer.pbr_renderer import box_downsample
 
 DETAIL_SIGMA = 2.0  # output pixels: what is finer than this Gaussian counts as the albedo's detail
+EXPORTED_MATERIAL_KEYS = ("exported_albedo_psnr", "exported_roughness_psnr", "exported_metallic_psnr")
 SWAPS = ("export", "truth_albedo", "truth_materials", "truth_geometry", "truth_albedo_detail", "truth_albedo_coarse")
 
 
@@ -82,3 +88,15 @@ def swapped_images(export, truth, tables, directions: np.ndarray, supersample: i
     }
     return {name: (box_downsample(image, supersample), box_downsample(coverage[..., None], supersample)[..., 0])
             for name, (image, coverage) in images.items()}
+
+
+def exported_material_scores(export, truth) -> dict[str, float]:
+    """The export's albedo (after the per-channel scale, as the evaluation's albedo PSNR), roughness
+    and metallic PSNR against the truth's, on the pixels both G-buffers cover (RenderOutput-like, the
+    same camera)."""
+    both = (export.mask > 0.5) & (truth.mask > 0.5)
+    if not both.any():
+        return {key: float("nan") for key in EXPORTED_MATERIAL_KEYS}
+    return {"exported_albedo_psnr": scaled_albedo_psnr(export.albedo, truth.albedo, both),
+            "exported_roughness_psnr": psnr(export.roughness, truth.roughness, both),
+            "exported_metallic_psnr": psnr(export.metallic, truth.metallic, both)}

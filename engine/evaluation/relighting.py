@@ -197,7 +197,7 @@ class Relighter:
     def _score_swaps(self, scene, obj, truth: RelightTruth, outputs: list[int], scores: dict[str, list[float]]) -> None:
         from lirm.engine.lighting.lighting_tables import tables_from_lighting
 
-        from .relight_swaps import swapped_images
+        from .relight_swaps import exported_material_scores, swapped_images
 
         if truth.gbuffers is None:
             raise ValueError("the swap study needs the truth's G-buffers: build the held-out set with relight_gbuffers")
@@ -212,6 +212,8 @@ class Relighter:
                 metrics = relight_metrics(radiance, coverage, truth.radiance[i], truth.mask[i], truth.exposure_ev)
                 for key in ("relight_psnr_h", "relight_psnr_l"):
                     scores.setdefault(f"swap_{name}_{key}", []).append(metrics[key])
+            for key, value in exported_material_scores(export, truth.gbuffers[i]).items():
+                scores.setdefault(key, []).append(value)
 
     def _lighting_for(self, obj, truth: RelightTruth):
         key = (obj.name, truth.name, truth.rotation_deg)

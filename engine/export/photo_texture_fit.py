@@ -51,7 +51,12 @@ Progress = Callable[[str, int, int], None]
 class TextureFitConfig:
     steps: int = 200
     learning_rate: float = 0.02  # Adam, on the textures' logits
-    material_prior: float = 1.0  # weight of the squared distance of roughness and metallic from the field's
+    # Weight of the squared distance of roughness and metallic from the field's (after the metal search:
+    # from the chosen fit's). 0.1 relit the same saved fields a little better (synthetic set +0.18 dB
+    # PSNR-L, glTF pair +0.13) but only by letting roughness drift from the truth (the export's own
+    # roughness PSNR -1.0 dB; 0.3: +0.10 / +0.13 dB for -0.34): not adopted (README, "The material
+    # prior in the texture fit").
+    material_prior: float = 1.0
     fit_materials: bool = True  # False: the albedo alone
     min_photo_alpha: float = 0.99  # photo pixels less covered than this (the mask's soft edge) are left out
     lighting_levels: int = 12  # roughness levels the lighting is tabulated at

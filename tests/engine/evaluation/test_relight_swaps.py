@@ -1,6 +1,7 @@
 """The swap study (relight_swaps.py): an export whose only fault is its albedo. Swapping in the truth's
 albedo (or all its materials) relights it as the truth; swapping in the truth's geometry, the same
-sphere, changes nothing; the unswapped shading equals the renderer's own relit export."""
+sphere, changes nothing; the unswapped shading equals the renderer's own relit export; the export's
+own materials are scored against the truth's in the same G-buffers."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import numpy as np
 import torch
 
 from lirm.engine.cameras import Camera, look_at
-from lirm.engine.evaluation.relight_swaps import SWAPS, swapped_images
+from lirm.engine.evaluation.relight_swaps import SWAPS, exported_material_scores, swapped_images
 from lirm.engine.evaluation.relighting import RELIGHT_SUPERSAMPLE, relight_metrics, render_relight_truth
 from lirm.engine.export.export_asset import ExportConfig, export_field
 from lirm.engine.export.field_mesh import MeshExtractionConfig
@@ -45,6 +46,11 @@ def test_swapping_in_the_true_albedo_fixes_an_export_whose_albedo_is_wrong(tmp_p
             fine = camera.scaled(RELIGHT_SUPERSAMPLE)
             gbuffer = renderer.render_view(scene, fine, lighting, RenderSettings(show_environment=False, supersample=1))
             images = swapped_images(gbuffer, relit.gbuffers[i], tables, fine.pixel_rays()[1], RELIGHT_SUPERSAMPLE)
+            # The export's own materials: its roughness and metallic are the truth's (0.5, 0), its albedo grey.
+            exported = exported_material_scores(gbuffer, relit.gbuffers[i])
+            assert exported["exported_roughness_psnr"] > 40 and exported["exported_metallic_psnr"] > 40, exported
+            assert exported["exported_albedo_psnr"] < 20, exported
+            assert exported_material_scores(relit.gbuffers[i], relit.gbuffers[i])["exported_albedo_psnr"] > 40
             assert set(images) == set(SWAPS) and images["export"][0].shape == (48, 48, 3)
             for name, (radiance, coverage) in images.items():
                 scores[name].append(relight_metrics(radiance, coverage, relit.radiance[i], relit.mask[i], 0.0)["relight_psnr_l"])
