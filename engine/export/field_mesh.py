@@ -33,6 +33,9 @@ class MeshExtractionConfig:
     keep_all_significant: bool = True  # keep every component above that share (handles, lids), not only the largest
     face_budget: int | None = 20_000  # decimate to at most this many faces (None: keep all)
     narrow_band_stride: int = 4  # SDF exact only in coarse cells of this many samples near the surface (0: every sample)
+    # The surface extracted at SDF = iso_level instead of 0: grown outward by it (field units). export_field
+    # sets it for a refined field (silhouette_offset.py), so that the mesh sits where the photos saw it.
+    iso_level: float = 0.0
 
 
 class NoSurfaceError(LirmUserError):
@@ -77,6 +80,7 @@ def extract_field_mesh(field, config: MeshExtractionConfig = MeshExtractionConfi
 
     stage("", f"sampling the SDF on a {config.resolution}^3 grid", 0)
     values, origin, spacing = field_sdf_grid(field, config.resolution, config.chunk, config.narrow_band_stride)
+    values = values - config.iso_level if config.iso_level else values
     check_has_surface(values)
     stage("sdf_grid", "marching cubes", 1)
     extracted = marching_cubes(values, origin, spacing)

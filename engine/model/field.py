@@ -57,16 +57,20 @@ class FieldSample:
 class Field:
     """A decoded reconstruction state: planes (and panoramas) plus the heads that read them."""
 
-    def __init__(self, config: LIRMConfig, heads: FieldHeads, planes: torch.Tensor, panoramas: torch.Tensor | None):
+    def __init__(self, config: LIRMConfig, heads: FieldHeads, planes: torch.Tensor, panoramas: torch.Tensor | None,
+                 fitted_beta: float | None = None):
         self.config = config
         self.heads = heads
         self.planes = planes
         self.panoramas = panoramas
+        # The VolSDF beta a refinement fitted this field at (None: a decoded update). Its silhouettes sit
+        # a few beta outside its zero level (export/silhouette_offset.py); the export corrects for that.
+        self.fitted_beta = fitted_beta
 
     def item(self, b: int) -> "Field":
         """The field of batch entry `b` alone (the renderer takes one scene at a time)."""
         panoramas = None if self.panoramas is None else self.panoramas[b:b + 1]
-        return Field(self.config, self.heads, self.planes[b:b + 1], panoramas)
+        return Field(self.config, self.heads, self.planes[b:b + 1], panoramas, self.fitted_beta)
 
     @property
     def radius(self) -> float:

@@ -35,6 +35,8 @@ def save_field_state(field: Field, path: str | Path, updates: int, extra: dict |
             raise LirmUserError(f"the refined field's {name} holds NaN or infinite values; it was not saved to {path}")
     metadata = {"format": FORMAT, "updates": str(updates), "signature": field.config.signature(),
                 "config": json.dumps(field.config.to_dict()), "extra": json.dumps(extra or {})}
+    if field.fitted_beta is not None:  # (states saved before 2026-11-28 have none: exported at their zero level)
+        metadata["fitted_beta"] = repr(float(field.fitted_beta))
     return atomic_write(path, lambda tmp: save_file(tensors, str(tmp), metadata=metadata))
 
 
@@ -59,6 +61,7 @@ def load_field_state(path: str | Path, device: str | torch.device = "cpu") -> tu
             tensors = {k: f.get_tensor(k) for k in f.keys()}
         config = LIRMConfig.from_dict(json.loads(meta["config"]))
         extra = json.loads(meta.get("extra") or "{}")
+        fitted_beta = float(meta["fitted_beta"]) if "fitted_beta" in meta else None
     except (SafetensorError, OSError, ValueError, KeyError, TypeError) as err:
         raise LirmUserError(f"refined state {path} is corrupt or truncated ({err}); run `lirm refine` again") from err
     heads = FieldHeads(config).to(device)
@@ -71,7 +74,7 @@ def load_field_state(path: str | Path, device: str | torch.device = "cpu") -> tu
     for p in heads.parameters():
         p.requires_grad_(False)
     extra["updates"] = int(meta.get("updates", 0))
-    return Field(config, heads, tensors["planes"], tensors.get("panoramas")), extra
+    return Field(config, heads, tensors["planes"], tensors.get("panoramas"), fitted_beta), extra
 
 
 def load_field(path: str | Path, model=None, device: str | torch.device = "cpu") -> Field:

@@ -25,6 +25,7 @@ class RefinableField(nn.Module):
         self.heads = heads
         self.planes = nn.Parameter(planes.detach().clone().float())
         self.panoramas = None if panoramas is None else nn.Parameter(panoramas.detach().clone().float())
+        self.fitted_beta: float | None = None  # set by the refiner: the beta of the state it keeps (Field.fitted_beta)
 
     @classmethod
     def from_field(cls, field: Field) -> "RefinableField":
@@ -48,7 +49,7 @@ class RefinableField(nn.Module):
         for p in heads.parameters():
             p.requires_grad_(False)
         panoramas = None if self.panoramas is None else self.panoramas.detach().clone()
-        return Field(self.config, heads.eval(), self.planes.detach().clone(), panoramas)
+        return Field(self.config, heads.eval(), self.planes.detach().clone(), panoramas, self.fitted_beta)
 
     @torch.no_grad()
     def resample_planes(self, resolution: int) -> None:

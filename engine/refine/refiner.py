@@ -117,6 +117,7 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
     stage = 0
     ema_loss = ema_mse = None
     best = (math.inf, 0, refinable.snapshot())
+    best_inv_beta = inv_beta = config.inv_beta[0]
     best_lighting = None if lighting is None else {k: v.detach().clone() for k, v in lighting.state_dict().items()}
     history: list[dict] = []
     start = time.perf_counter()
@@ -191,6 +192,7 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
                 # throw away the detail the finer planes are there for.
                 if ema_loss < best[0] and stage == len(resolutions) - 1:
                     best = (ema_loss, step, refinable.snapshot())
+                    best_inv_beta = inv_beta
                     if lighting is not None:
                         best_lighting = {k: v.detach().clone() for k, v in lighting.state_dict().items()}
             if live is not None and time.perf_counter() - last_live >= live_every:
@@ -213,8 +215,10 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
     if best_step == 0 or math.isinf(best_loss):
         # No candidate at the last resolution yet (a short or cancelled run): the latest state is the best known.
         best_step, best_loss = step, (ema_loss if ema_loss is not None else math.inf)
+        best_inv_beta = inv_beta
     else:
         refinable.load_snapshot(snapshot)
         if lighting is not None and best_lighting is not None:
             lighting.load_state_dict(best_lighting)
+    refinable.fitted_beta = 1.0 / best_inv_beta
     return RefineResult(refinable, step, seconds, best_step, best_loss, stopped, history, lighting)

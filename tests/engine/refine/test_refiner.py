@@ -74,6 +74,8 @@ def test_refinement_lowers_its_loss_and_learns_the_silhouette(sphere_views):
     field = result.field.frozen_field()
     sdf = field.sdf(torch.tensor([[[0.0, 0.0, 0.0], [0.0, 0.0, 0.9]]]))[0]
     assert sdf[0] < 0 < sdf[1]
+    # It carries the beta of the state kept (the schedule's end, reached by then), for the export's surface level.
+    assert field.fitted_beta == pytest.approx(1.0 / SMALL.inv_beta[1]), field.fitted_beta
 
 
 def test_a_predicted_material_is_kept_where_the_photos_say_nothing(sphere_views):
@@ -230,9 +232,11 @@ def test_decoded_field_resamples_to_finer_planes_without_moving_the_surface():
 
 def test_refined_state_round_trips_and_refuses_garbage(tmp_path):
     field = _tiny_field(seed=5).frozen_field()
+    assert load_field_state(save_field_state(field, tmp_path / "old.safetensors", updates=1))[0].fitted_beta is None
+    field.fitted_beta = 0.002
     path = save_field_state(field, tmp_path / "state.safetensors", updates=3, extra={"started_from": "scratch"})
     loaded, extra = load_field_state(path)
-    assert extra == {"started_from": "scratch", "updates": 3}
+    assert extra == {"started_from": "scratch", "updates": 3} and loaded.fitted_beta == 0.002
     points = torch.rand(1, 200, 3) * 2 - 1
     dirs = torch.nn.functional.normalize(torch.randn(1, 200, 3), dim=-1)
     a, b = field.sample(points, dirs), loaded.sample(points, dirs)
