@@ -10,7 +10,7 @@ chord), which is ln 2 (opacity 0.5, the mask's edge) at
 
 A refinement fits the rendered silhouettes to the masks, so its zero level comes out inside the object
 by that much (measured on the synthetic set after 3 minutes at 1/beta = 500: the field's surface points
-a median 0.004-0.008 R inside the true surface on every object, 76-92% of them inside; the rendered
+a median 0.004-0.008 R inside the true surface on every object, 70-92% of them inside; the rendered
 opacity 2-4% larger than the masks), and so would the export, which is that zero level.
 """
 
