@@ -18,7 +18,7 @@ import torch
 
 from lirm.engine.export.field_mesh import field_sdf_grid
 from lirm.engine.export.marching_cubes import marching_cubes
-from lirm.engine.export.silhouette_offset import silhouette_offset
+from lirm.engine.export.silhouette_offset import surface_level
 from lirm.engine.metrics import psnr, scaled_albedo_psnr, ssim
 from lirm.engine.model.field import device_of
 from lirm.engine.model.occupancy_grid import OccupancyConfig, OccupancyGrid
@@ -106,7 +106,7 @@ def _finite_mean(values: list[float]) -> float | None:
 def _field_mesh_points(field, config: EvalConfig) -> np.ndarray:
     values, origin, spacing = field_sdf_grid(field, config.mesh_resolution, narrow_band_stride=4)
     # The surface the export takes (a refined field's at its silhouettes' level: silhouette_offset.py).
-    level = silhouette_offset(getattr(field, "fitted_beta", None) or 0.0)
+    level = surface_level(field)
     mesh = marching_cubes(values - level if level else values, origin, spacing)
     return surface_samples(mesh.vertices, mesh.faces, config.chamfer_points, seed=0)
 

@@ -19,7 +19,7 @@ from lirm.engine.errors import LirmUserError
 from .field_mesh import MeshExtractionConfig, extract_field_mesh
 from .glb_writer import TexturedMesh, write_glb
 from .photo_texture_fit import PhotoViews, TextureFitConfig, TextureFitReport, fit_textures_to_photos
-from .silhouette_offset import silhouette_offset
+from .silhouette_offset import surface_level
 from .texture_bake import BakeConfig, BakedTextures, bake_textures
 from .uv_atlas import AtlasConfig, UVMesh, unwrap
 
@@ -64,10 +64,9 @@ class ExportResult:
 def surface_extraction(field_, config: ExportConfig) -> MeshExtractionConfig:
     """config.mesh, at the level a refined field's silhouettes sit at (a decoded update has no fitted
     beta and is extracted at its zero level)."""
-    beta = getattr(field_, "fitted_beta", None)
-    if not config.silhouette_correction or beta is None or config.mesh.iso_level:
+    if not config.silhouette_correction or config.mesh.iso_level:
         return config.mesh
-    return replace(config.mesh, iso_level=silhouette_offset(beta))
+    return replace(config.mesh, iso_level=surface_level(field_))
 
 
 def _check_writable(path: Path) -> None:

@@ -29,3 +29,10 @@ def silhouette_offset(beta: float, curvature_radius: float = TYPICAL_CURVATURE_R
     if not beta > 0:
         return 0.0
     return max(beta * math.log(math.sqrt(2.0 * math.pi * curvature_radius / beta) / (2.0 * math.log(2.0))), 0.0)
+
+
+def surface_level(field_) -> float:
+    """The SDF level a field's surface is taken at (export, Chamfer distance): a refined field's
+    silhouette offset at the beta it was fitted at (Field.fitted_beta), 0 for any other field."""
+    beta = getattr(field_, "fitted_beta", None)
+    return silhouette_offset(beta) if beta is not None else 0.0
