@@ -21,7 +21,7 @@ import numpy as np
 
 from lirm.engine.cameras import Camera, undistort_normalized
 
-__all__ = ["VoxelHull", "carve_visual_hull", "project_hull", "project_points", "sphere_silhouette"]
+__all__ = ["VoxelHull", "carve_visual_hull", "cut_below_plane", "project_hull", "project_points", "sphere_silhouette"]
 
 # Half the space diagonal of a unit cube: a voxel of size s fits in a ball of radius 0.866 s.
 _HALF_DIAGONAL = math.sqrt(3.0) / 2.0
@@ -262,6 +262,18 @@ def carve_visual_hull(
     idx = np.concatenate([done, idx[_carve(pts, _HALF_DIAGONAL * s, *args)[0]]])
     hull.occupancy[idx[:, 0], idx[:, 1], idx[:, 2]] = True
     return hull
+
+
+def cut_below_plane(hull: VoxelHull, plane: tuple[np.ndarray, float], margin_voxels: float = 1.5) -> None:
+    """Drop hull voxels under the support plane (no view sees under the table) and the layer just
+    above it: voxels straddling the floor would keep a collar of floor around the object's base
+    in every mask (measured on a bottle: IoU 0.45); the sliver of the base they cost is small."""
+    normal, offset = np.asarray(plane[0], dtype=np.float64), float(plane[1])
+    idx = np.argwhere(hull.occupancy)
+    if len(idx) == 0:
+        return
+    below = idx[hull.centers_of(idx) @ normal - offset < margin_voxels * hull.voxel_size]
+    hull.occupancy[below[:, 0], below[:, 1], below[:, 2]] = False
 
 
 def _splat_discs(shape: tuple[int, int], xy: np.ndarray, radii: np.ndarray) -> np.ndarray:

@@ -1,0 +1,124 @@
+"""Make the normalised world hold the whole object, as the photos' masks outline it.
+
+Normalisation sizes the object from its sparse SfM points (normalize.py), before any mask exists.
+A part without points is invisible to it: the WaterBottle's dark, smooth cap carries none, so the
+points' top stops at the bottle's shoulder and the cap rises out of the ball of radius R (its masks'
+hull reaches 1.07-1.16 R above the origin on three shoots), out of the model's [-R, R]^3 box, and a
+reconstruction would cut it off.
+
+Once the masks exist, their visual hull bounds the object from above, however few points a part
+has. When an object standing on a support plane rises above the ball, the world is re-fitted to the
+hull as normalize.py fits it to points: centre on the plane's normal through the current centre,
+half-way between the plane and the hull's top, radius a high percentile of the hull's distances
+from it (at least half its height), mapped to `fill * R`. An object that already fits is left
+exactly as it was: the hull is one voxel fatter than the object and bulges where a ring of views
+cannot carve (the middle of a flat top, by up to its half-width times the tangent of the views'
+elevation; a mug's rim), so it is a check that the object fits, not a better size. The bulge can
+make the check fire for an object whose top is just under R; the re-fit then leaves it more room,
+never less. An object taller than the masks' search ball (R / fill) is brought in only as far as
+that ball lets the hull see it.
+
+Masks are pixels and do not move; cameras, points and the support plane are moved by the same
+similarity, recorded in the capture's normalisation so exports still undo it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from lirm.engine.cameras import Camera
+from lirm.engine.capture.masks import check_mask
+from lirm.engine.capture.normalize import Normalization
+from lirm.engine.capture.visual_hull import carve_visual_hull, cut_below_plane
+
+__all__ = ["SilhouetteFitConfig", "SilhouetteFit", "fit_world_to_silhouettes", "moved_camera", "moved_normalization"]
+
+
+@dataclass(frozen=True)
+class SilhouetteFitConfig:
+    resolution: int = 80
+    # As the automatic masks' own hull: one view's bad mask must not cut the hull.
+    min_views_fraction: float = 0.85
+    radius_percentile: float = 95.0
+
+
+@dataclass
+class SilhouetteFit:
+    """What the check found: the hull's top above the origin (along the plane's normal), and the
+    similarity applied (x -> scale * (x - shift)); scale 1 and shift 0 when the object fitted."""
+
+    top: float
+    scale: float
+    shift: np.ndarray
+
+    @property
+    def moved(self) -> bool:
+        return self.scale != 1.0 or bool(np.any(self.shift != 0.0))
+
+
+def fit_world_to_silhouettes(
+    masks: dict[str, np.ndarray],
+    cameras: dict[str, Camera],
+    normalization: Normalization,
+    target_radius: float,
+    fill: float,
+    search_radius: float,
+    config: SilhouetteFitConfig = SilhouetteFitConfig(),
+) -> SilhouetteFit | None:
+    """The similarity that makes the masks' hull fit the ball of `target_radius` (see the module
+    docstring), or None when there is nothing to check: no support plane, fewer than 3 usable masks
+    or an empty hull. `search_radius` bounds the carving (the masks were searched in that ball)."""
+    if normalization.plane is None:
+        return None
+    usable = {f: m for f, m in masks.items() if f in cameras and check_mask(m) is None}
+    if len(usable) < 3:
+        return None
+    hull = carve_visual_hull(usable, {f: cameras[f] for f in usable}, radius=search_radius,
+                             resolution=config.resolution, min_views_fraction=config.min_views_fraction,
+                             within_sphere=True)
+    cut_below_plane(hull, normalization.plane)
+    if hull.is_empty:
+        return None
+    normal, offset = np.asarray(normalization.plane[0], dtype=np.float64), float(normalization.plane[1])
+    centers = hull.occupied_centers()
+    heights = centers @ normal - offset
+    top_height = float(heights.max()) + 0.5 * hull.voxel_size
+    top = top_height + offset  # the hull's top, measured from the origin along the normal
+    if top <= target_radius:
+        return SilhouetteFit(top, 1.0, np.zeros(3))
+    # The origin's foot on the plane, raised to half the hull's height.
+    shift = normal * (offset + top_height / 2.0)
+    radius = max(float(np.percentile(np.linalg.norm(centers - shift, axis=1), config.radius_percentile)),
+                 top_height / 2.0)
+    return SilhouetteFit(top, fill * target_radius / radius, shift)
+
+
+def moved_camera(camera: Camera, scale: float, shift: np.ndarray) -> Camera:
+    """The camera in the world moved by x -> scale * (x - shift) (orientation unchanged)."""
+    c2w = np.array(camera.c2w, dtype=np.float64, copy=True)
+    c2w[:3, 3] = scale * (c2w[:3, 3] - shift)
+    return camera.with_pose(c2w)
+
+
+def moved_normalization(norm: Normalization, scale: float, shift: np.ndarray) -> Normalization:
+    """`norm` followed by x -> scale * (x - shift): the transform, the plane and its margin."""
+    step = np.eye(4)
+    step[:3, :3] *= scale
+    step[:3, 3] = -scale * np.asarray(shift, dtype=np.float64)
+    world_from_source = step @ norm.world_from_source
+    source_from_world = np.linalg.inv(world_from_source)
+    plane = None
+    if norm.plane is not None:
+        normal = np.asarray(norm.plane[0], dtype=np.float64)
+        plane = (normal, float(scale * (norm.plane[1] - normal @ shift)))
+    return Normalization(
+        world_from_source,
+        center_source=source_from_world[:3, 3].copy(),
+        radius_source=norm.radius_source / scale,  # fill * R over the new, larger total scale
+        up_source=norm.up_source,
+        used_points=norm.used_points,
+        plane=plane,
+        plane_margin=norm.plane_margin * scale,
+    )
