@@ -68,9 +68,11 @@ def fit_world_to_silhouettes(
     config: SilhouetteFitConfig = SilhouetteFitConfig(),
 ) -> SilhouetteFit | None:
     """The similarity that makes the masks' hull fit the ball of `target_radius` (see the module
-    docstring), or None when there is nothing to check: no support plane, fewer than 3 usable masks
-    or an empty hull. `search_radius` bounds the carving (the masks were searched in that ball)."""
-    if normalization.plane is None:
+    docstring), or None when there is nothing to check: no floor under the object (no plane, or a
+    wall), fewer than 3 usable masks or an empty hull. `search_radius` bounds the carving (the masks were searched in that ball)."""
+    if normalization.plane is None or abs(float(normalization.plane[0][2])) < 0.9:
+        # Only a floor: views of an object on a wall all look from its front, cannot carve its depth
+        # toward them, and the hull's distance from the wall says little about the object's.
         return None
     usable = {f: m for f, m in masks.items() if f in cameras and check_mask(m) is None}
     if len(usable) < 3:

@@ -210,6 +210,8 @@ class Relighter:
             for name, (radiance, coverage) in swapped_images(export, truth.gbuffers[i], tables, directions,
                                                              RELIGHT_SUPERSAMPLE).items():
                 metrics = relight_metrics(radiance, coverage, truth.radiance[i], truth.mask[i], truth.exposure_ev)
+                if not metrics:  # no scored pixel in this view (as in _score_scene: the view adds nothing)
+                    continue
                 for key in ("relight_psnr_h", "relight_psnr_l"):
                     scores.setdefault(f"swap_{name}_{key}", []).append(metrics[key])
             for key, value in exported_material_scores(export, truth.gbuffers[i]).items():

@@ -83,5 +83,8 @@ def test_an_object_that_fits_is_left_alone_and_nothing_without_a_plane():
     assert 0.75 < fit.top <= 1.0
     wall = Normalization(norm.world_from_source, np.zeros(3), 1.0, np.array([0.0, 0.0, 1.0]), 100, plane=None)
     assert fit_world_to_silhouettes(masks, cameras, wall, 1.0, 0.85, 1.0 / 0.85) is None
+    wall.plane = (np.array([1.0, 0.0, 0.0]), -0.85)  # a wall: its hull's depth is not the object's
+    tall_cameras, tall_masks = _cylinder_masks(top=1.1)
+    assert fit_world_to_silhouettes(tall_masks, tall_cameras, wall, 1.0, 0.85, 1.0 / 0.85) is None
     two = dict(list(masks.items())[:2])
     assert fit_world_to_silhouettes(two, cameras, norm, 1.0, 0.85, 1.0 / 0.85) is None

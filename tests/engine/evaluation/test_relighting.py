@@ -47,6 +47,27 @@ def test_the_metrics_ignore_a_global_scale_and_see_errors():
     assert relight_metrics(inner, mask, truth, mask, 0.0)["relight_psnr_l"] < 60
 
 
+
+def test_a_view_that_sees_nothing_to_score_adds_nothing_to_any_column(renderer):
+    """A flat panel seen edge-on has no pixel left once the mask is shrunk by the margin: that view
+    is skipped by the relighting columns and by the swap study alike (the study once failed there)."""
+    environment = make_procedural_environment("studio", width=128)
+    cameras = [Camera.from_fov(48, 48, 40.0, look_at((3.0, 0.0, 1.0), (0, 0, 0))),
+               Camera.from_fov(48, 48, 40.0, look_at((3.0, 0.0, 1.0), (6.0, 0.0, 1.0)))]  # looks away
+    material = PBRMaterial(base_color_factor=(*ORANGE, 1.0), roughness_factor=0.5, metallic_factor=0.0)
+    truth = render_relight_truth(renderer, [uv_sphere(0.5, segments=48, material=material)], np.eye(4), cameras, [0, 1],
+                                 environment, 0.0, 0.0, keep_gbuffers=True)
+    assert not truth.mask[1].any()
+    obj = SimpleNamespace(name="sphere", relight=truth, views=SimpleNamespace(cameras=cameras))
+    relighter = Relighter(RelightConfig(grid=48, faces=3000, texture=64, swap_study=True))
+    scores = {}
+    try:
+        relighter.score(SphereField(0.5, pattern=_Plain(colour_a=ORANGE, colour_b=ORANGE)), obj, [0, 1], scores)
+    finally:
+        relighter.release()
+    assert len(scores["relight_psnr_l"]) == 1 and len(scores["swap_truth_albedo_relight_psnr_l"]) == 1, scores
+    assert scores["relight_psnr_l"][0] > 25.0
+
 @pytest.mark.slow
 def test_an_export_of_the_true_shape_relights_like_the_truth(renderer, tmp_path):
     environment = make_procedural_environment("sky", width=256)
