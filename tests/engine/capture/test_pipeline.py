@@ -15,6 +15,7 @@ import pytest
 from lirm.engine.assets.environment_files import resolve_environment
 from lirm.engine.capture.capture_folder import Capture
 from lirm.engine.capture.report import format_capture_report
+from lirm.engine.capture.visual_hull import carve_visual_hull
 from lirm.engine.capture.pipeline import CaptureConfig, resume_capture, run_capture
 from lirm.engine.cli import main
 from lirm.engine.errors import EnvironmentLoadError
@@ -243,6 +244,16 @@ def test_pipeline_on_a_gltf_photographed_on_a_floor_under_an_hdri(tmp_path, shar
     assert summary.registered == 16
     assert accuracy["rotation_deg_max"] < 1.0 and accuracy["center_error_max"] < 0.01
     assert accuracy["mask_iou_mean"] >= 0.9, accuracy
+    # The whole bottle is in the model's ball, its cap too (which carries no sparse points): the true
+    # masks' hull, carved with the capture's cameras, stays under R above the origin (it rose to
+    # 1.25 R before the world was fitted to the masks; the hull is a little above the true top).
+    capture = summary.capture
+    names = {state.record.original.stem: fid for fid, state in capture.frames.items()}
+    true_masks = {names[f"shot_{k}"]: m for k, m in shoot.masks.items()}
+    hull = carve_visual_hull(true_masks, {f: capture.cameras[f] for f in true_masks}, radius=1.4, resolution=96,
+                             min_views_fraction=1.0, within_sphere=True)
+    normal, _ = capture.normalization.plane
+    assert float((hull.occupied_centers() @ normal).max()) < 1.0
     # The lighting the photos were taken in, from their backgrounds, usable wherever an HDRI is.
     lighting = resolve_environment(tmp_path / "capture")
     assert lighting.name == "as photographed" and lighting.radiance.shape == (64, 128, 3)
