@@ -42,6 +42,7 @@ import numpy as np
 from lirm.engine.cameras import Camera
 from lirm.engine.capture.floor_parallax import floor_disagreement, nearest_views, off_floor_evidence
 from lirm.engine.capture.masks import check_mask
+from lirm.engine.capture.normalize import is_floor
 from lirm.engine.capture.visual_hull import (
     VoxelHull,
     carve_visual_hull,
@@ -505,8 +506,7 @@ def automatic_masks(
                 seen_by[f] = seen[finite]
     views: dict[str, _View] = {}
     masks: dict[str, np.ndarray] = {}  # at the seed size until the first refinement, then work size
-    floor_known = (cfg.floor_parallax_threshold > 0 and support_plane is not None and len(frames) >= 2
-                   and abs(float(np.asarray(support_plane[0])[2])) > 0.9)
+    floor_known = cfg.floor_parallax_threshold > 0 and is_floor(support_plane) and len(frames) >= 2
     models: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for f in frames:
         img = np.asarray(images[f])

@@ -30,7 +30,7 @@ import numpy as np
 
 from lirm.engine.cameras import Camera
 from lirm.engine.capture.masks import check_mask
-from lirm.engine.capture.normalize import Normalization
+from lirm.engine.capture.normalize import Normalization, is_floor
 from lirm.engine.capture.visual_hull import carve_visual_hull, cut_below_plane
 
 __all__ = ["SilhouetteFitConfig", "SilhouetteFit", "fit_world_to_silhouettes", "moved_camera", "moved_normalization"]
@@ -70,7 +70,7 @@ def fit_world_to_silhouettes(
     """The similarity that makes the masks' hull fit the ball of `target_radius` (see the module
     docstring), or None when there is nothing to check: no floor under the object (no plane, or a
     wall), fewer than 3 usable masks or an empty hull. `search_radius` bounds the carving (the masks were searched in that ball)."""
-    if normalization.plane is None or abs(float(normalization.plane[0][2])) < 0.9:
+    if not is_floor(normalization.plane):
         # Only a floor: views of an object on a wall all look from its front, cannot carve its depth
         # toward them, and the hull's distance from the wall says little about the object's.
         return None

@@ -92,6 +92,12 @@ class Normalization:
         return keep
 
 
+def is_floor(plane: tuple[np.ndarray, float] | None) -> bool:
+    """Whether a support plane (unit normal, offset) is a floor under the object (normal near +Z in
+    the normalised world) rather than a wall behind it."""
+    return plane is not None and abs(float(np.asarray(plane[0])[2])) > 0.9
+
+
 def axes_convergence(cameras: list[Camera]) -> np.ndarray:
     """The point closest (least squares) to every optical axis."""
     a = np.zeros((3, 3))

@@ -27,7 +27,7 @@ from .disk_space import require_free_space, stage_bytes
 from .ingest import Cancelled, IngestConfig, ingest_photos, natural_key
 from .masks import check_mask, cut_by_border, load_user_masks, mask_from_alpha, propagate_mask_fix
 from .fit_to_silhouettes import fit_world_to_silhouettes, moved_camera, moved_normalization
-from .normalize import NormalizeConfig, estimate_normalization
+from .normalize import NormalizeConfig, estimate_normalization, is_floor
 from .pose_import import import_colmap_model, import_transforms_json
 from .records import PosingResult
 from .undistort import undistort_image
@@ -318,7 +318,7 @@ def _masks(capture: Capture, config: CaptureConfig, progress, cancel) -> None:
         if capture.normalization is not None and len(capture.points):
             is_object = capture.normalization.object_point_mask(capture.points, radius)
             plane = capture.normalization.plane
-            if plane is not None and abs(float(plane[0][2])) > 0.9 and mask_config.ball_probable_fraction == 0:
+            if is_floor(plane) and mask_config.ball_probable_fraction == 0:
                 # The object was sized from points above a known floor: its ball is a good prior. Not
                 # for a wall (the fox, a mounted head): the ball in front of a wall takes in picture
                 # frames and the wall beside the object, and the points alone outline it better.

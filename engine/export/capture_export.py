@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from lirm.engine.capture.capture_folder import Capture
+from lirm.engine.capture.normalize import is_floor
 from lirm.engine.errors import LirmUserError
 from lirm.engine.model.pretrained import ModelSource, load_model
 from lirm.engine.model.field_state import load_field
@@ -81,7 +82,7 @@ def export_transform(capture: Capture) -> np.ndarray:
     scale = capture.normalization.scale
     m[:3, :3] /= scale
     plane = capture.normalization.plane
-    if plane is not None and abs(float(plane[0][2])) > 0.9:  # a floor under the object (n ~ +Z)
+    if is_floor(plane):
         m[2, 3] = -float(plane[1]) / float(plane[0][2]) / scale
     return m
 
