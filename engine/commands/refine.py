@@ -15,9 +15,10 @@ from .common import check_output, check_render_memory, check_render_options, req
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser("refine", help="per-scene refinement: fit the field to all the capture's views (one more step of its history)")
     parser.add_argument("capture", type=Path, help="a capture folder made by `lirm capture`")
-    parser.add_argument("--init", choices=["auto", "lirm", "hull", "scratch"], default="auto",
+    parser.add_argument("--init", choices=["auto", "lirm", "hull", "hull-lirm", "scratch"], default="auto",
                         help="start from: auto (default: the last refinement, else the latest LIRM update, else the hull), "
-                             "lirm (the latest update), hull (the masks' carved visual hull) or scratch")
+                             "lirm (the latest update), hull (the masks' carved visual hull), hull-lirm (the hull's "
+                             "shape with the latest update's materials) or scratch")
     parser.add_argument("--preset", choices=["fast", "default", "quality"], default="default",
                         help="settings: fast (1 min), default (3 min), quality (10 min, finer planes)")
     parser.add_argument("--minutes", type=float, help="time budget of the fit (default: the preset's)")

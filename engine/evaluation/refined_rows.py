@@ -70,6 +70,9 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
         refinable = initial_fields.from_lirm(lirm_field(model, obj, updates), resolution)
     elif init == "hull":
         refinable = initial_fields.from_hull(hull, model.config, model.heads, resolution, refine.hull_init_steps, refine.seed)
+    elif init == "hull-lirm":
+        refinable = initial_fields.from_hull(hull, model.config, model.heads, resolution, refine.hull_init_steps, refine.seed,
+                                             materials=lirm_field(model, obj, updates))
     elif init == "scratch":
         refinable = initial_fields.scratch(model.config, resolution, refine.seed)
     else:
@@ -78,7 +81,7 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
     if refine.inverse_rendering:
         lighting = (oracle_lighting(obj, true_lighting) if true_lighting is not None
                     else input_lighting(obj, [i for s in sets for i in s], refine))
-    result = refine_field(refinable, views, refine, grid, lighting=lighting, start_has_materials=init == "lirm")
+    result = refine_field(refinable, views, refine, grid, lighting=lighting, start_has_materials=init in ("lirm", "hull-lirm"))
     return RefinedObject(result.field.frozen_field(), time.perf_counter() - start, result.steps, views, result.lighting)
 
 

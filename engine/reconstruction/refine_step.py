@@ -9,8 +9,10 @@ record in summary.json. Export, guidance, evaluation and the app read it exactly
 Where it starts (`init`):
 - "auto" (default): the last refined step if the history has one (a warm start: after new photos
   and a new update, refining goes on from the earlier refinement with all the views), else the
-  latest LIRM update, else the carved hull;
-- "lirm": the latest LIRM update's decoded field; "hull": the visual hull of the masks; "scratch".
+  latest LIRM update or, when the hull agrees better with the photos, the hull's shape with that
+  update's materials ("hull-lirm"), else the carved hull;
+- "lirm": the latest LIRM update's decoded field; "hull": the visual hull of the masks; "hull-lirm": the
+  hull's shape with the latest update's roughness and metallic; "scratch".
 
 The step is written into a hidden folder first and moved into place only when it is complete, so a
 cancelled or killed refinement leaves the history as it was.
@@ -44,7 +46,7 @@ from lirm.engine.refine.refiner import RefineTick, refine_field
 from .novel_views import novel_view_cameras
 from .session import ReconstructConfig, last_update_entry, open_checked, prepared_views, summary_with, write_pictures
 
-INIT_CHOICES = ("auto", "lirm", "hull", "scratch")
+INIT_CHOICES = ("auto", "lirm", "hull", "hull-lirm", "scratch")
 
 
 @dataclass
@@ -89,6 +91,15 @@ def _starting_field(capture: Capture, init: str, source: ModelSource, views: Ref
         number, entry = refined[-1]
         field = load_field(capture.root / entry["state"], model)
         return RefinableField.from_field(field), f"refinement {number} (warm start)"
+    if init == "hull-lirm":
+        base = last_update_entry(capture.updates)
+        if base is None:
+            raise LirmUserError(f"{capture.root} has no LIRM update to take materials from: run `lirm reconstruct "
+                                f"{capture.root}` first, or refine with --init hull")
+        field = load_field(capture.root / base["state"], model)
+        return (initial_fields.from_hull(hull, model.config, model.heads, resolution, config.hull_init_steps, config.seed,
+                                         cancel, materials=field),
+                f"carved hull with LIRM update {base['update']}'s materials")
     if init in ("auto", "lirm"):
         base = last_update_entry(capture.updates)
         if base is not None:
@@ -97,17 +108,19 @@ def _starting_field(capture: Capture, init: str, source: ModelSource, views: Ref
             if init == "lirm":
                 return from_lirm, f"LIRM update {base['update']}"
             # A prior that does not yet follow its photos can start further from them than the hull
-            # does: start from whichever of the two agrees better with the views.
+            # does: start from whichever of the two agrees better with the views. The hull takes the
+            # prior's roughness and metallic (it has none of its own; README: what that was worth).
             from_hull = initial_fields.from_hull(hull, model.config, model.heads, resolution, config.hull_init_steps,
-                                                 config.seed, cancel)
+                                                 config.seed, cancel, materials=field)
             grid = initial_fields.sampling_grid(hull, model.config.radius, config.hull_dilation_voxels)
             losses = {name: initial_fields.photo_loss(candidate, views, grid, config)
                       for name, candidate in (("lirm", from_lirm), ("hull", from_hull))}
             if losses["lirm"] <= losses["hull"]:
                 return from_lirm, f"LIRM update {base['update']}"
             notes.append(f"the carved hull agrees better with the photos than LIRM update {base['update']} "
-                         f"(loss {losses['hull']:.4f} against {losses['lirm']:.4f}): starting from the hull")
-            return from_hull, "carved hull"
+                         f"(loss {losses['hull']:.4f} against {losses['lirm']:.4f}): starting from the hull's shape "
+                         f"with the update's materials")
+            return from_hull, f"carved hull with LIRM update {base['update']}'s materials"
         if init == "lirm":
             raise LirmUserError(f"{capture.root} has no LIRM update to start from: run `lirm reconstruct {capture.root}` "
                                 f"first, or refine with --init hull")

@@ -1,5 +1,6 @@
-"""Where a refinement starts: the LIRM state's decoded field, the carved visual hull of the masks, or
-nothing; and the occupancy grid (the hull, dilated) that bounds where every refinement samples."""
+"""Where a refinement starts: the LIRM state's decoded field, the carved visual hull of the masks, the
+hull's shape with the LIRM field's materials, or nothing; and the occupancy grid (the hull, dilated)
+that bounds where every refinement samples."""
 
 from __future__ import annotations
 
@@ -13,12 +14,12 @@ from lirm.engine.model.field import Field, FieldHeads
 from lirm.engine.model.occupancy_grid import OccupancyGrid
 
 from .config import RefineConfig
-from .objective import batch_loss
+from .objective import batch_loss, sdf_gradients
 from .ray_rendering import render_ray_batch
 from .refinable_field import RefinableField, fresh_field
 from .refine_views import RefineViews
 
-INITS = ("lirm", "hull", "scratch")
+INITS = ("lirm", "hull", "hull-lirm", "scratch")
 
 
 def masks_hull(views: RefineViews, resolution: int, radius: float) -> CarvedHullState:
@@ -45,10 +46,13 @@ def from_lirm(field: Field, resolution: int) -> RefinableField:
 
 
 def from_hull(hull: CarvedHullState, config: LIRMConfig, heads: FieldHeads | None, resolution: int, steps: int,
-              seed: int = 0, cancel=None) -> RefinableField:
+              seed: int = 0, cancel=None, materials: Field | None = None) -> RefinableField:
     """A field regressed onto the carved hull: its signed distance, colour and linearised albedo at
     points spread over the bounding sphere and crowded near the hull's surface. `heads`: the
-    model's (the prior's decoders, as a starting point) or None for fresh ones."""
+    model's (the prior's decoders, as a starting point) or None for fresh ones. `materials`: a field
+    (the LIRM state's) whose roughness and metallic, read at its own surface nearest each point,
+    the regression takes too: the hull's shape (thin parts the prior lost) with the prior's
+    materials (which the hull has none of)."""
     refinable = fresh_field(config, resolution, seed)
     if heads is not None:
         refinable = RefinableField.from_field(Field(config, heads, refinable.planes, refinable.panoramas))
@@ -76,10 +80,28 @@ def from_hull(hull: CarvedHullState, config: LIRMConfig, heads: FieldHeads | Non
         band = 0.1 * config.radius  # far from the surface only the sign matters much
         loss = (sample.sdf.clamp(-band, band) - truth.sdf.clamp(-band, band)).abs().mean()
         loss = loss + (sample.colour - truth.colour).abs().mean() + (sample.albedo - truth.albedo).abs().mean()
+        if materials is not None:
+            roughness, metallic = materials_near(materials, points)
+            loss = loss + (sample.roughness - roughness).abs().mean() + (sample.metallic - metallic).abs().mean()
         optimiser.zero_grad(set_to_none=True)
         loss.backward()
         optimiser.step()
     return refinable
+
+
+@torch.no_grad()
+def materials_near(field: Field, points: torch.Tensor, newton_steps: int = 2) -> tuple[torch.Tensor, torch.Tensor]:
+    """(roughness, metallic) of `field` at its own surface nearest each of `points` (1, N, 3): each
+    point moved along the SDF's gradient by its signed distance, twice. The heads are trained on
+    surface points; what they say far off the surface (where the hull has parts the field lacks)
+    means nothing."""
+    moved = points
+    for _ in range(newton_steps):
+        distance = field.sdf(moved)
+        normal = torch.nn.functional.normalize(sdf_gradients(field, moved[0], 0.5 * field.normal_eps), dim=-1)[None]
+        moved = (moved - distance[..., None] * normal).clamp(-field.radius, field.radius)
+    sample = field.sample(moved)
+    return sample.roughness, sample.metallic
 
 
 def _surface_points(occupancy: np.ndarray, radius: float) -> np.ndarray:

@@ -214,7 +214,7 @@ def test_refine_in_the_window_shows_the_field_as_it_fits(lego_capture, tmp_path,
     assert any(m.startswith("refinement stopped early; the best state so far is step 3") for m in messages), messages
     updates = json.loads((capture / "capture.json").read_text())["updates"]
     assert [u.get("kind", "update") for u in updates] == ["update", "refine", "refine"]
-    assert updates[1]["started_from"] in ("LIRM update 1", "carved hull") and updates[2]["started_from"] == "refinement 2 (warm start)"
+    assert updates[1]["started_from"] in ("LIRM update 1", "carved hull with LIRM update 1's materials") and updates[2]["started_from"] == "refinement 2 (warm start)"
     assert not live.exists()  # the live state is gone once the refinement ends
     # Refine inverse-renders the materials by default (the app's "materials" box, on).
     refined = json.loads((capture / "reconstruction" / "update_02" / "refine.json").read_text())

@@ -44,6 +44,8 @@ def test_refine_is_a_step_of_the_history_that_export_and_suggest_read(capture, t
 
     assert main(["refine", str(capture), "--init", "lirm"] + QUICK) == 3
     assert "no LIRM update to start from" in capsys.readouterr().err
+    assert main(["refine", str(capture), "--init", "hull-lirm"] + QUICK) == 3
+    assert "no LIRM update to take materials from" in capsys.readouterr().err
     assert main(["refine", str(capture), "--init", "hull", "--holdout-every", "4"] + QUICK) == 0
     out = capsys.readouterr().out
     assert "refinement 1 (from carved hull): 12 steps" in out and "held-out views" in out
@@ -75,6 +77,13 @@ def test_refine_is_a_step_of_the_history_that_export_and_suggest_read(capture, t
     capsys.readouterr()
     assert main(["suggest", str(capture), "--k", "2", "--heat-map", str(tmp_path / "heat.png")]) == 0
     assert "refinement 3" in capsys.readouterr().out
+
+
+def test_refine_from_the_hull_with_the_updates_materials(capture, capsys):
+    assert main(["reconstruct", str(capture), "--updates", "1"] + FAST_UPDATE) == 0
+    assert main(["refine", str(capture), "--init", "hull-lirm"] + QUICK) == 0
+    assert "(from carved hull with LIRM update 1's materials)" in capsys.readouterr().out
+    assert Capture.open(capture).updates[-1]["started_from"] == "carved hull with LIRM update 1's materials"
 
 
 def test_light_lobes_need_the_materials_and_a_sane_count(capture, capsys):

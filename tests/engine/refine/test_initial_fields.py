@@ -1,0 +1,47 @@
+"""Where a refinement starts: the hull's shape with another field's materials (`--init hull-lirm`)."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from lirm.engine.cameras import orbit_cameras
+from lirm.engine.model.analytic_fields import SphereField
+from lirm.engine.model.config import preset
+from lirm.engine.refine import initial_fields
+
+
+def test_materials_are_read_at_the_fields_own_surface_nearest_each_point():
+    """A point outside a sphere reads the roughness at the sphere's surface point nearest it, not
+    at itself (the roughness ramps along x, so the two differ)."""
+    materials = SphereField(sphere_radius=0.5, center=(0.3, 0.0, 0.0))
+    points = torch.tensor([[[-0.7, 0.0, 0.0], [0.3, 0.0, 0.75]]])
+    roughness, metallic = initial_fields.materials_near(materials, points)
+    surface = torch.tensor([[[-0.2, 0.0, 0.0], [0.3, 0.0, 0.5]]])
+    expected = materials.sample(surface).roughness
+    assert torch.allclose(roughness, expected, atol=1e-3), (roughness, expected)
+    assert abs(float(roughness[0, 0]) - float(materials.sample(points).roughness[0, 0])) > 0.1
+
+
+def test_the_hull_start_takes_the_other_fields_materials(analytic_views):
+    """Regressed onto the hull of a sphere's masks with a glossy, metal prediction beside it, the start
+    carries that prediction on its surface; without it, it knows nothing of it."""
+    views = analytic_views(SphereField(sphere_radius=0.5), orbit_cameras(6, 20.0, 2.6, 32, 32, 50.0))
+    hull = initial_fields.masks_hull(views, 32, 1.0)
+    config = preset("tiny")
+    prediction = initial_fields.scratch(config, 16, seed=3)
+    with torch.no_grad():  # glossy metal everywhere
+        prediction.heads.roughness[-1].bias.fill_(-2.0)
+        prediction.heads.metallic[-1].bias.fill_(2.0)
+    target = prediction.frozen_field().sample(torch.zeros(1, 1, 3))
+    surface = 0.5 * torch.nn.functional.normalize(torch.randn(1, 256, 3, generator=torch.Generator().manual_seed(0)), dim=-1)
+    found = {}
+    for with_materials in (True, False):
+        start = initial_fields.from_hull(hull, config, None, 16, steps=120, seed=1,
+                                         materials=prediction.frozen_field() if with_materials else None)
+        sample = start.frozen_field().sample(surface)
+        found[with_materials] = (float(sample.roughness.mean()), float(sample.metallic.mean()))
+        assert float(start.frozen_field().sdf(torch.zeros(1, 1, 3))) < 0  # the hull's inside stays inside
+    assert found[True][0] == pytest.approx(float(target.roughness), abs=0.08), (found, float(target.roughness))
+    assert found[True][1] == pytest.approx(float(target.metallic), abs=0.08), (found, float(target.metallic))
+    assert abs(found[False][1] - float(target.metallic)) > 0.3, found
