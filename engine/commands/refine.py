@@ -16,7 +16,8 @@ def add_parser(subparsers) -> None:
     parser = subparsers.add_parser("refine", help="per-scene refinement: fit the field to all the capture's views (one more step of its history)")
     parser.add_argument("capture", type=Path, help="a capture folder made by `lirm capture`")
     parser.add_argument("--init", choices=["auto", "lirm", "hull", "hull-lirm", "scratch"], default="auto",
-                        help="start from: auto (default: the last refinement, else the latest LIRM update, else the hull), "
+                        help="start from: auto (default: the last refinement, else the latest LIRM update or the hull with its "
+                             "materials, whichever agrees better with the photos, else the hull), "
                              "lirm (the latest update), hull (the masks' carved visual hull), hull-lirm (the hull's "
                              "shape with the latest update's materials) or scratch")
     parser.add_argument("--preset", choices=["fast", "default", "quality"], default="default",

@@ -68,11 +68,10 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
     resolution = refine.plane_resolutions[0]
     if init == "lirm":
         refinable = initial_fields.from_lirm(lirm_field(model, obj, updates), resolution)
-    elif init == "hull":
-        refinable = initial_fields.from_hull(hull, model.config, model.heads, resolution, refine.hull_init_steps, refine.seed)
-    elif init == "hull-lirm":
+    elif init in ("hull", "hull-lirm"):
+        materials = lirm_field(model, obj, updates) if init == "hull-lirm" else None
         refinable = initial_fields.from_hull(hull, model.config, model.heads, resolution, refine.hull_init_steps, refine.seed,
-                                             materials=lirm_field(model, obj, updates))
+                                             materials=materials)
     elif init == "scratch":
         refinable = initial_fields.scratch(model.config, resolution, refine.seed)
     else:

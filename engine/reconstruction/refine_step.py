@@ -91,44 +91,42 @@ def _starting_field(capture: Capture, init: str, source: ModelSource, views: Ref
         number, entry = refined[-1]
         field = load_field(capture.root / entry["state"], model)
         return RefinableField.from_field(field), f"refinement {number} (warm start)"
-    if init == "hull-lirm":
-        base = last_update_entry(capture.updates)
-        if base is None:
-            raise LirmUserError(f"{capture.root} has no LIRM update to take materials from: run `lirm reconstruct "
-                                f"{capture.root}` first, or refine with --init hull")
-        field = load_field(capture.root / base["state"], model)
-        return (initial_fields.from_hull(hull, model.config, model.heads, resolution, config.hull_init_steps, config.seed,
-                                         cancel, materials=field),
-                f"carved hull with LIRM update {base['update']}'s materials")
-    if init in ("auto", "lirm"):
+
+    def hull_start(materials=None):
+        return initial_fields.from_hull(hull, model.config, model.heads, resolution, config.hull_init_steps, config.seed,
+                                        cancel, materials=materials)
+
+    if init in ("auto", "lirm", "hull-lirm"):
         base = last_update_entry(capture.updates)
         if base is not None:
             field = load_field(capture.root / base["state"], model)
+            named = f"LIRM update {base['update']}"
+            if init == "hull-lirm":
+                return hull_start(field), f"carved hull with {named}'s materials"
             from_lirm = initial_fields.from_lirm(field, resolution)
             if init == "lirm":
-                return from_lirm, f"LIRM update {base['update']}"
+                return from_lirm, named
             # A prior that does not yet follow its photos can start further from them than the hull
             # does: start from whichever of the two agrees better with the views. The hull takes the
             # prior's roughness and metallic (it has none of its own; README: what that was worth).
-            from_hull = initial_fields.from_hull(hull, model.config, model.heads, resolution, config.hull_init_steps,
-                                                 config.seed, cancel, materials=field)
+            from_hull = hull_start(field)
             grid = initial_fields.sampling_grid(hull, model.config.radius, config.hull_dilation_voxels)
             losses = {name: initial_fields.photo_loss(candidate, views, grid, config)
                       for name, candidate in (("lirm", from_lirm), ("hull", from_hull))}
             if losses["lirm"] <= losses["hull"]:
-                return from_lirm, f"LIRM update {base['update']}"
-            notes.append(f"the carved hull agrees better with the photos than LIRM update {base['update']} "
+                return from_lirm, named
+            notes.append(f"the carved hull agrees better with the photos than {named} "
                          f"(loss {losses['hull']:.4f} against {losses['lirm']:.4f}): starting from the hull's shape "
                          f"with the update's materials")
-            return from_hull, f"carved hull with LIRM update {base['update']}'s materials"
-        if init == "lirm":
-            raise LirmUserError(f"{capture.root} has no LIRM update to start from: run `lirm reconstruct {capture.root}` "
+            return from_hull, f"carved hull with {named}'s materials"
+        if init != "auto":
+            wanted = "start from" if init == "lirm" else "take materials from"
+            raise LirmUserError(f"{capture.root} has no LIRM update to {wanted}: run `lirm reconstruct {capture.root}` "
                                 f"first, or refine with --init hull")
         notes.append("no LIRM update yet: starting from the carved hull of the masks")
         init = "hull"
     if init == "hull":
-        return (initial_fields.from_hull(hull, model.config, model.heads, resolution, config.hull_init_steps, config.seed, cancel),
-                "carved hull")
+        return hull_start(), "carved hull"
     return initial_fields.scratch(model.config, resolution, config.seed), "scratch"
 
 
