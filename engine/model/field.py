@@ -95,7 +95,18 @@ class Field:
     def sample(self, points: torch.Tensor, view_dirs: torch.Tensor | None = None, materials: bool = True) -> FieldSample:
         """`materials=False` leaves roughness and metallic out (None): a fit of the radiance that does not
         read them saves two of the seven heads at every sample."""
+        return self.sample_features(self.features(points), points, view_dirs, materials)
+
+    def sdf_and_features(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(B, N, 3) -> the SDF (B, N) and the plane features it was read from (B, N, F), so that the
+        other heads can read the same features later at only some of the points (the refinement's
+        samples that carry weight: ray_rendering.py)."""
         f = self.features(points)
+        return self.heads.sdf(f)[..., 0] + self._sdf_bias(points), f
+
+    def sample_features(self, f: torch.Tensor, points: torch.Tensor, view_dirs: torch.Tensor | None = None,
+                        materials: bool = True, sdf: torch.Tensor | None = None) -> FieldSample:
+        """`sample` from features already read at `points` (and the SDF there, when known)."""
         h = self.heads
         normal = F.normalize(h.normal(f), dim=-1)
         colour = None
@@ -107,7 +118,7 @@ class Field:
             else:
                 colour = torch.sigmoid(h.colour(f))
         return FieldSample(
-            sdf=h.sdf(f)[..., 0] + self._sdf_bias(points),
+            sdf=h.sdf(f)[..., 0] + self._sdf_bias(points) if sdf is None else sdf,
             albedo=torch.sigmoid(h.albedo(f)),
             roughness=torch.sigmoid(h.roughness(f))[..., 0] if materials else None,
             metallic=torch.sigmoid(h.metallic(f))[..., 0] if materials else None,

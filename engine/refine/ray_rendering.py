@@ -9,6 +9,8 @@ renderer (model/volume_renderer.py) composites it, with samples placed where the
   samples and can appear.
 - The field is evaluated with gradients at the occupied coarse and the fine samples together, sorted
   along the ray; each sample's density holds over the distance to the next (VolSDF's quadrature).
+- The SDF is read at all of them; the other heads (colour, albedo, materials, normal) only at the
+  samples whose weight is above APPEARANCE_WEIGHT, from the same plane features.
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ import torch
 from lirm.engine.model.field import volsdf_density
 from lirm.engine.model.occupancy_grid import OccupancyGrid
 from lirm.engine.model.volume_renderer import sphere_interval
+
+from .config import APPEARANCE_WEIGHT
 
 UNIFORM_FLOOR = 0.05  # share of the fine-sample density spread over the whole occupied part of the ray
 
@@ -39,8 +43,10 @@ class RayBatchRender:
 
 def render_ray_batch(field, origins: torch.Tensor, directions: torch.Tensor, grid: OccupancyGrid | None, beta: float,
                      coarse_samples: int, fine_samples: int, generator: torch.Generator | None = None,
-                     background: float = 1.0, materials: bool = True) -> RayBatchRender:
-    """`materials=False`: roughness and metallic are not rendered (None), for losses that do not read them."""
+                     background: float = 1.0, materials: bool = True, prune_weight: float = APPEARANCE_WEIGHT) -> RayBatchRender:
+    """`materials=False`: roughness and metallic are not rendered (None), for losses that do not read them.
+    `prune_weight`: samples of less weight are left out of the colour and the materials (their SDF
+    still shapes the opacity and the transmittance); 0 keeps every sample."""
     n, device = origins.shape[0], origins.device
     near, far, hit = sphere_interval(origins, directions, field.radius)
     span = (far - near)[:, None]
@@ -67,21 +73,40 @@ def render_ray_batch(field, origins: torch.Tensor, directions: torch.Tensor, gri
     zeros1 = torch.zeros(n, device=device, dtype=origins.dtype)
     if points.shape[0] == 0:
         return RayBatchRender(zeros3 + background, zeros1, zeros3, zeros1, zeros1, zeros3, zeros1, points.detach(), 0)
-    sample = field.sample(points[None], directions[ray_index][None], materials=materials)
+    view_dirs = directions[ray_index]
+    split = hasattr(field, "sdf_and_features") and prune_weight > 0.0
+    if split:
+        sdf, features = field.sdf_and_features(points[None])
+        sdf = sdf[0]
+    else:
+        sample = field.sample(points[None], view_dirs[None], materials=materials)
+        sdf = sample.sdf[0]
     sigma = torch.zeros(n, t_all.shape[1], device=device, dtype=origins.dtype)
-    sigma = sigma.index_put(index, volsdf_density(sample.sdf[0], beta) / beta)
+    sigma = sigma.index_put(index, volsdf_density(sdf, beta) / beta)
     alpha = 1.0 - torch.exp(-sigma * delta)
     transmittance = torch.cumprod(torch.cat([torch.ones_like(alpha[:, :1]), 1.0 - alpha[:, :-1] + 1e-10], dim=1), dim=1)
     weights = (alpha * transmittance)[occupied]  # (K,)
+    opacity = zeros1.index_add(0, ray_index, weights)
+    depth = zeros1.index_add(0, ray_index, weights.detach() * t_all[occupied])
+    near_surface = points.detach()[weights.detach() > 1e-3]
+    if split:
+        # The appearance heads only where a sample carries weight: behind the first surface and far in
+        # front of it a sample's weight is ~0 (70% of the samples once 1/beta is sharp), and reading
+        # six heads there is most of a step's cost for nothing the composite would show.
+        kept = weights.detach() > prune_weight
+        if not bool(kept.any()):
+            kept = weights.detach() >= weights.detach().max()
+        sample = field.sample_features(features[:, kept], points[kept][None], view_dirs[kept][None], materials=materials,
+                                       sdf=sdf[kept][None])
+        ray_index, weights = ray_index[kept], weights[kept]
     w = weights[:, None]
     composite = lambda values: zeros3.index_add(0, ray_index, w * values)  # noqa: E731
     composite1 = lambda values: zeros1.index_add(0, ray_index, weights * values)  # noqa: E731
-    opacity = composite1(torch.ones_like(weights))
-    colour = composite(sample.colour[0]) + (1.0 - opacity)[:, None] * background
-    near_surface = points.detach()[weights.detach() > 1e-3]
+    # Over the background by the opacity of the samples composited (all of them unless pruned), so
+    # that a pruned sample is absent from the colour rather than black; the mask term reads them all.
+    colour = composite(sample.colour[0]) + (1.0 - composite1(torch.ones_like(weights)))[:, None] * background
     roughness = composite1(sample.roughness[0]) if materials else None
     metallic = composite1(sample.metallic[0]) if materials else None
-    depth = zeros1.index_add(0, ray_index, weights.detach() * t_all[occupied])
     return RayBatchRender(colour, opacity, composite(sample.albedo[0]), roughness, metallic, composite(sample.normal[0]),
                           depth, near_surface, int(points.shape[0]))
 

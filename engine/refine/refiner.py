@@ -163,7 +163,8 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
             # Roughness and metallic along the rays only where a loss reads them there.
             materials = shading is not None or (anchor is None and config.losses.material_prior > 0)
             render = render_ray_batch(field_, origins, directions, grid, 1.0 / inv_beta, config.coarse_samples,
-                                      config.fine_samples, generator, materials=materials)
+                                      config.fine_samples, generator, materials=materials,
+                                      prune_weight=config.appearance_weight)
             if shading is not None and config.shading_normal in ("sdf", "sdf-fixed"):
                 render = with_sdf_normals(field_, render, origins, directions, shape_surface=config.shading_normal == "sdf")
             if floor is not None:

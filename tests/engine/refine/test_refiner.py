@@ -17,7 +17,7 @@ from lirm.engine.model.config import preset
 from lirm.engine.model.field_state import load_field, load_field_state, save_field_state
 from lirm.engine.model.lirm import LIRM
 from lirm.engine.refine import initial_fields
-from lirm.engine.refine.config import RefineConfig, refine_preset
+from lirm.engine.refine.config import APPEARANCE_WEIGHT, RefineConfig, refine_preset
 from lirm.engine.refine.ray_rendering import render_ray_batch
 from lirm.engine.refine.refinable_field import RefinableField
 from lirm.engine.refine.refine_views import RefineViews
@@ -61,6 +61,32 @@ def test_hull_grid_holds_the_object_and_samples_stay_in_it(sphere_views):
     out = render_ray_batch(field, sphere_views.origins[index], sphere_views.directions[index], grid, 0.05, 16, 8)
     assert out.colour.shape == (len(index), 3) and torch.isfinite(out.colour).all()
     assert 0 < out.samples < len(index) * 24  # empty space was skipped
+
+
+def test_appearance_heads_read_only_the_samples_with_weight_and_the_render_barely_moves(sphere_views):
+    hull = initial_fields.masks_hull(sphere_views, 32, 1.0)
+    grid = initial_fields.sampling_grid(hull, 1.0, 1)
+    refinable = _tiny_field()
+    index = torch.arange(0, sphere_views.pixels, 7)
+    origins, directions = sphere_views.origins[index], sphere_views.directions[index]
+
+    def render(prune_weight):
+        field = refinable.field()
+        read = []
+        plain = field.sample_features
+        field.sample_features = lambda f, *args, **kwargs: read.append(f.shape[1]) or plain(f, *args, **kwargs)
+        out = render_ray_batch(field, origins, directions, grid, 0.01, 32, 16, torch.Generator().manual_seed(3),
+                               prune_weight=prune_weight)
+        gradient, = torch.autograd.grad(out.colour.sum() + out.albedo.sum(), refinable.planes)
+        return out, read, gradient
+
+    pruned, read, pruned_gradient = render(APPEARANCE_WEIGHT)
+    full, read_all, full_gradient = render(0.0)
+    assert read_all == [full.samples] and read[0] < 0.7 * pruned.samples  # behind the surface nothing is read
+    assert torch.equal(pruned.opacity, full.opacity)
+    assert (pruned.colour - full.colour).abs().max() < 5e-3 and (pruned.albedo - full.albedo).abs().max() < 5e-3
+    cosine = torch.nn.functional.cosine_similarity(pruned_gradient.flatten(), full_gradient.flatten(), dim=0)
+    assert cosine > 0.99, cosine
 
 
 def test_refinement_lowers_its_loss_and_learns_the_silhouette(sphere_views):
