@@ -14,7 +14,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from .config import LIRMConfig
-from .hexaplane import query_planes
+from .hexaplane import paired_halves, query_planes
 from .nde import query_nde, reflect
 
 
@@ -83,7 +83,18 @@ class Field:
         return 2.0 * (2.0 * self.config.radius / self.planes.shape[-1])
 
     def features(self, points: torch.Tensor) -> torch.Tensor:
-        return query_planes(self.planes, points, self.config.radius)
+        planes = self.planes
+        if planes.shape[1] != 6:
+            return query_planes(planes, points, self.config.radius)
+        # The hexa-plane's halves side by side (a copy of the planes), made once for all the reads of a
+        # step: while the planes are the same tensor, unchanged in place (its version counter, which
+        # inference tensors do not keep: those are paired at every read).
+        if planes.is_inference():
+            return query_planes(planes, points, self.config.radius)
+        key = (id(planes), planes._version, torch.is_grad_enabled())
+        if getattr(self, "_halves_key", None) != key:
+            self._halves, self._halves_key = paired_halves(planes), key
+        return query_planes(planes, points, self.config.radius, halves=self._halves)
 
     def sdf(self, points: torch.Tensor) -> torch.Tensor:
         """(B, N, 3) -> (B, N): MLP_s(f) + ||x|| - 0.1 R."""

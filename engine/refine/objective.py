@@ -77,14 +77,18 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
         # Half as many points anywhere in the bounding sphere keep the SDF a distance away from the surface too.
         far = (torch.rand(eikonal_points // 2, 3, generator=generator) * 2.0 - 1.0) * field.radius
         probes = torch.cat([points, far.to(points)])
-        gradient = sdf_gradients(field, probes, 0.5 * field.normal_eps)
-        terms["eikonal"] = ((gradient.norm(dim=-1) - 1.0) ** 2).mean()
+        count = probes.shape[0]
         if weights.curvature:
             # The surface's normal should change little over a short step: lumps a few views cannot
             # see (they cost the relighting, where every bump catches the new light) are flattened.
+            # Its probes are read with the eikonal's in one pass over the planes.
             step = torch.randn(points.shape[0], 3, generator=generator).to(points) * weights.curvature_step * field.radius
-            nearby = sdf_gradients(field, points + step, 0.5 * field.normal_eps)
-            here = gradient[: points.shape[0]]
+            probes = torch.cat([probes, points + step])
+        gradients = sdf_gradients(field, probes, 0.5 * field.normal_eps)
+        gradient = gradients[:count]
+        terms["eikonal"] = ((gradient.norm(dim=-1) - 1.0) ** 2).mean()
+        if weights.curvature:
+            here, nearby = gradient[: points.shape[0]], gradients[count:]
             terms["curvature"] = (1.0 - F.cosine_similarity(here, nearby, dim=-1)).mean()
         if weights.albedo_smooth:
             offsets = torch.randn(points.shape[0], 3, generator=generator).to(points) * CURVATURE_STEP * field.radius

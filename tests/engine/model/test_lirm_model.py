@@ -10,7 +10,7 @@ import torch
 
 from lirm.engine.errors import LirmUserError
 from lirm.engine.model.config import PRESETS, preset
-from lirm.engine.model.hexaplane import query_planes
+from lirm.engine.model.hexaplane import query_planes, query_planes_reference
 from lirm.engine.model.lirm import LIRM, ViewBatch
 from lirm.engine.model.nde import query_nde, reflect
 
@@ -90,6 +90,31 @@ def test_hexa_plane_bilinear_coordinates():
     pts = torch.tensor([[[0.25, -0.4, 0.1], [-0.6, 0.2, -0.3]]])
     f = query_planes(plane, pts, radius=1.0)
     torch.testing.assert_close(f[0, :, 0], pts[0, :, 0], atol=1e-5, rtol=0)  # xy plane, column = x
+
+
+def test_hexa_plane_query_reads_one_half_per_axis_as_the_reference_reads_both():
+    generator = torch.Generator().manual_seed(0)
+    planes = torch.randn(2, 6, 4, 16, 16, generator=generator, requires_grad=True)
+    pts = torch.rand(2, 3000, 3, generator=generator) * 2.4 - 1.2  # beyond the planes' edges too
+    pts[0, :50, 2] = 0.0  # on the plane between two halves
+    pts[0, 50:100, 0] = torch.linspace(-1.0, 1.0, 50)  # along an axis, to both outer edges
+    fast = query_planes(planes, pts, radius=1.0)
+    reference = query_planes_reference(planes, pts, radius=1.0)
+    torch.testing.assert_close(fast, reference, atol=1e-5, rtol=0)
+    g_fast, = torch.autograd.grad((fast * fast.cos()).sum(), planes)
+    g_reference, = torch.autograd.grad((reference * reference.cos()).sum(), planes)
+    torch.testing.assert_close(g_fast, g_reference, atol=1e-4, rtol=1e-4)
+
+
+def test_a_field_reads_its_planes_again_after_they_change_in_place(tiny):
+    field = tiny.decode(tiny.initial_state())
+    pts = torch.tensor([[[0.3, -0.2, 0.4], [-0.5, 0.1, -0.2]]])
+    planes = field.planes.detach().clone()
+    field.planes = planes
+    before = field.features(pts).clone()
+    with torch.no_grad():
+        planes.add_(1.0)  # what an optimiser step does to a refined field's planes
+    torch.testing.assert_close(field.features(pts), before + 1.0)
 
 
 def test_nde_lookup_follows_the_reflection_direction_and_rho():
