@@ -92,9 +92,10 @@ class Field:
         if planes.is_inference():
             return query_planes(planes, points, self.config.radius)
         key = (id(planes), planes._version, torch.is_grad_enabled())
-        if getattr(self, "_halves_key", None) != key:
-            self._halves, self._halves_key = paired_halves(planes), key
-        return query_planes(planes, points, self.config.radius, halves=self._halves)
+        cached = getattr(self, "_paired", None)  # (key, halves) in one attribute: a reader sees both or neither
+        if cached is None or cached[0] != key:
+            cached = self._paired = (key, paired_halves(planes))
+        return query_planes(planes, points, self.config.radius, halves=cached[1])
 
     def sdf(self, points: torch.Tensor) -> torch.Tensor:
         """(B, N, 3) -> (B, N): MLP_s(f) + ||x|| - 0.1 R."""
