@@ -84,12 +84,10 @@ class Field:
 
     def features(self, points: torch.Tensor) -> torch.Tensor:
         planes = self.planes
-        if planes.shape[1] != 6:
-            return query_planes(planes, points, self.config.radius)
         # The hexa-plane's halves side by side (a copy of the planes), made once for all the reads of a
         # step: while the planes are the same tensor, unchanged in place (its version counter, which
-        # inference tensors do not keep: those are paired at every read).
-        if planes.is_inference():
+        # inference tensors do not keep: those are paired at every read, as a tri-plane has no halves).
+        if planes.shape[1] != 6 or planes.is_inference():
             return query_planes(planes, points, self.config.radius)
         key = (id(planes), planes._version, torch.is_grad_enabled())
         cached = getattr(self, "_paired", None)  # (key, halves) in one attribute: a reader sees both or neither
