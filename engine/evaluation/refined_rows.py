@@ -55,6 +55,7 @@ class RefinedObject:
     steps: int
     views: RefineViews  # the input views it was fitted to
     lighting: object | None  # the lighting fitted with the materials (None without them)
+    start: str = ""  # where the fit started: the init asked for, or the one "auto" chose
 
 
 def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig, init: str, true_lighting=None) -> RefinedObject:
@@ -66,8 +67,15 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
     hull = initial_fields.masks_hull(views, refine.hull_resolution, model.config.radius)
     grid = initial_fields.sampling_grid(hull, model.config.radius, refine.hull_dilation_voxels, refine.device)
     resolution = refine.plane_resolutions[0]
+    chosen = init
     if init == "lirm":
         refinable = initial_fields.from_lirm(lirm_field(model, obj, updates), resolution)
+    elif init == "auto":  # as `lirm refine` starts a capture with no refinement yet
+        prediction = lirm_field(model, obj, updates)
+        from_hull = initial_fields.from_hull(hull, model.config, model.heads, resolution, refine.hull_init_steps, refine.seed,
+                                             materials=prediction)
+        refinable, chosen, _ = initial_fields.closer_start(initial_fields.from_lirm(prediction, resolution), from_hull,
+                                                           views, grid, refine)
     elif init in ("hull", "hull-lirm"):
         materials = lirm_field(model, obj, updates) if init == "hull-lirm" else None
         refinable = initial_fields.from_hull(hull, model.config, model.heads, resolution, refine.hull_init_steps, refine.seed,
@@ -80,8 +88,8 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
     if refine.inverse_rendering:
         lighting = (oracle_lighting(obj, true_lighting) if true_lighting is not None
                     else input_lighting(obj, [i for s in sets for i in s], refine))
-    result = refine_field(refinable, views, refine, grid, lighting=lighting, start_has_materials=init in ("lirm", "hull-lirm"))
-    return RefinedObject(result.field.frozen_field(), time.perf_counter() - start, result.steps, views, result.lighting)
+    result = refine_field(refinable, views, refine, grid, lighting=lighting, start_has_materials=init in ("lirm", "hull-lirm", "auto"))
+    return RefinedObject(result.field.frozen_field(), time.perf_counter() - start, result.steps, views, result.lighting, chosen)
 
 
 def input_lighting(obj: HeldoutObject, indices: list[int], refine: RefineConfig):
@@ -97,7 +105,7 @@ def input_lighting(obj: HeldoutObject, indices: list[int], refine: RefineConfig)
     cameras = {i: chosen.cameras[k] for k, i in enumerate(indices)}
     estimate = estimate_capture_lighting(images, masks, cameras, CaptureLightingConfig(proxy_radius=50.0))
     return PanoramaLighting.from_capture_lighting(estimate, refine.lighting_height, refine.lighting_sharpest_lobe,
-                                                  refine.light_lobes)
+                                                  refine.light_lobes, refine.lighting_smooth_scale)
 
 
 def oracle_lighting(obj: HeldoutObject, renderer):
@@ -156,7 +164,8 @@ def per_object_scores(model, objects: list[HeldoutObject], config: EvalConfig, r
         keys = ("psnr", "ssim", "albedo_psnr", "roughness_psnr", "metallic_psnr", "chamfer") + (
             RELIGHT_KEYS if relighter is not None else ())
         baked = {k: float(np.mean(v)) for k, v in scores.items() if k.startswith(("baked_", "plain_", "swap_", "exported_"))}  # RelightConfig.also_*, swap_study
-        rows.append({"object": obj.name, "seconds": refined.seconds, "steps": refined.steps, **{k: row[k] for k in keys}, **baked})
+        rows.append({"object": obj.name, "start": refined.start, "seconds": refined.seconds, "steps": refined.steps,
+                     **{k: row[k] for k in keys}, **baked})
     return rows
 
 

@@ -106,19 +106,16 @@ def _starting_field(capture: Capture, init: str, source: ModelSource, views: Ref
             from_lirm = initial_fields.from_lirm(field, resolution)
             if init == "lirm":
                 return from_lirm, named
-            # A prior that does not yet follow its photos can start further from them than the hull
-            # does: start from whichever of the two agrees better with the views. The hull takes the
-            # prior's roughness and metallic (it has none of its own; README: what that was worth).
-            from_hull = hull_start(field)
+            # Whichever of LIRM and the hull agrees better with the views; the hull takes the prior's
+            # roughness and metallic (it has none of its own; README: what that was worth).
             grid = initial_fields.sampling_grid(hull, model.config.radius, config.hull_dilation_voxels)
-            losses = {name: initial_fields.photo_loss(candidate, views, grid, config)
-                      for name, candidate in (("lirm", from_lirm), ("hull", from_hull))}
-            if losses["lirm"] <= losses["hull"]:
-                return from_lirm, named
+            start, chosen, losses = initial_fields.closer_start(from_lirm, hull_start(field), views, grid, config)
+            if chosen == "lirm":
+                return start, named
             notes.append(f"the carved hull agrees better with the photos than {named} "
-                         f"(loss {losses['hull']:.4f} against {losses['lirm']:.4f}): starting from the hull's shape "
+                         f"(loss {losses['hull-lirm']:.4f} against {losses['lirm']:.4f}): starting from the hull's shape "
                          f"with the update's materials")
-            return from_hull, f"carved hull with {named}'s materials"
+            return start, f"carved hull with {named}'s materials"
         if init != "auto":
             wanted = "start from" if init == "lirm" else "take materials from"
             raise LirmUserError(f"{capture.root} has no LIRM update to {wanted}: run `lirm reconstruct {capture.root}` "
@@ -175,7 +172,7 @@ def _refine_locked(capture_dir, source: ModelSource, config: RefineConfig, init:
                          "are not inverse-rendered")
         else:
             lighting = PanoramaLighting.from_capture_lighting(estimate, config.lighting_height, config.lighting_sharpest_lobe,
-                                                                    config.light_lobes)
+                                                                    config.light_lobes, config.lighting_smooth_scale)
     try:
         result = refine_field(refinable, views, config, grid, progress, cancel, live, live_every, lighting=lighting,
                               start_has_materials=started_from not in ("carved hull", "scratch"))

@@ -20,6 +20,8 @@ from .refinable_field import RefinableField, fresh_field
 from .refine_views import RefineViews
 
 INITS = ("lirm", "hull", "hull-lirm", "scratch")
+# "auto" (`lirm refine`'s default on a capture with no refinement yet): whichever of LIRM and
+# hull-lirm agrees better with the photos (`closer_start`).
 
 
 def masks_hull(views: RefineViews, resolution: int, radius: float) -> CarvedHullState:
@@ -125,7 +127,24 @@ def photo_loss(refinable: RefinableField, views: RefineViews, grid: OccupancyGri
     field = refinable.field()
     render = render_ray_batch(field, views.origins[index], views.directions[index], grid, 1.0 / config.inv_beta[1],
                               config.coarse_samples, config.fine_samples, generator)
-    weights = type(config.losses)(colour=1.0, mask=config.losses.mask, eikonal=0.0, normal=0.0, albedo=0.0,
-                                  material_prior=0.0, plane_tv=0.0)
+    # Only the colour and the mask: every other term (regularisers on points this batch does not
+    # sample) must be off, or its mean over no points is NaN and every comparison of starts is False
+    # (which made `--init auto` always take the hull until 2026-11-29).
+    weights = type(config.losses)(colour=1.0, mask=config.losses.mask, eikonal=0.0, curvature=0.0, normal=0.0, albedo=0.0,
+                                  material_prior=0.0, plane_tv=0.0, volume=0.0, floor=0.0, pbr=0.0, shared_materials=0.0)
     loss, _ = batch_loss(field, render, views.colours[index], views.alphas[index], weights, 0, generator)
+    if not torch.isfinite(loss):
+        raise ValueError(f"the starting field's photo loss is {float(loss)}: its colours or SDF are not finite")
     return float(loss)
+
+
+def closer_start(from_lirm: RefinableField, from_hull: RefinableField, views: RefineViews, grid: OccupancyGrid | None,
+                 config: RefineConfig) -> tuple[RefinableField, str, dict[str, float]]:
+    """The start of `lirm refine --init auto`: a prior that does not yet follow its photos can start
+    further from them than the masks' hull does, so whichever of the two agrees better with the views
+    (`photo_loss` on the same rays; LIRM on a tie). Returns the field, "lirm" or "hull-lirm", and both
+    losses."""
+    losses = {name: photo_loss(candidate, views, grid, config) for name, candidate in (("lirm", from_lirm), ("hull-lirm", from_hull))}
+    if losses["lirm"] <= losses["hull-lirm"]:
+        return from_lirm, "lirm", losses
+    return from_hull, "hull-lirm", losses

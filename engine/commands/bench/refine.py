@@ -18,8 +18,9 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--size", type=int, default=128, help="side of the protocol views and of the input crops (default 128)")
     parser.add_argument("--output-views", type=int, default=6, help="output views scored per object (default 6 of 12)")
     parser.add_argument("--minutes", type=float, nargs="+", default=[0.5, 1.0, 3.0, 10.0], help="budgets (default 0.5 1 3 10)")
-    parser.add_argument("--init", choices=("lirm", "hull", "hull-lirm", "scratch"), default="lirm",
-                        help="start from (default lirm; hull-lirm: the hull's shape with LIRM's materials)")
+    parser.add_argument("--init", choices=("lirm", "hull", "hull-lirm", "scratch", "auto"), default="lirm",
+                        help="start from (default lirm; hull-lirm: the hull's shape with LIRM's materials; auto: whichever "
+                             "of the two agrees better with the inputs, as `lirm refine` starts a capture)")
     parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                         help="a refinement setting, e.g. losses.eikonal=0, edge_ray_fraction=0, plane_resolutions=(128,); repeatable")
     parser.add_argument("--models", type=Path, default=Path("../shared/data/pbr_models"), help="glTF folder of the gltf set")

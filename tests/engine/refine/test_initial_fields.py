@@ -9,6 +9,7 @@ from lirm.engine.cameras import orbit_cameras
 from lirm.engine.model.analytic_fields import SphereField
 from lirm.engine.model.config import preset
 from lirm.engine.refine import initial_fields
+from lirm.engine.refine.config import RefineConfig
 
 
 def test_materials_are_read_at_the_fields_own_surface_nearest_each_point():
@@ -45,3 +46,18 @@ def test_the_hull_start_takes_the_other_fields_materials(analytic_views):
     assert found[True][0] == pytest.approx(float(target.roughness), abs=0.08), (found, float(target.roughness))
     assert found[True][1] == pytest.approx(float(target.metallic), abs=0.08), (found, float(target.metallic))
     assert abs(found[False][1] - float(target.metallic)) > 0.3, found
+
+
+def test_the_auto_start_takes_whichever_field_agrees_better_with_the_photos(analytic_views):
+    """`closer_start` (what `lirm refine` and `lirm bench refine --init auto` start a capture from):
+    a field regressed onto the photos' hull wins over an untrained one whichever slot it is given in."""
+    views = analytic_views(SphereField(sphere_radius=0.5), orbit_cameras(6, 20.0, 2.6, 32, 32, 50.0))
+    hull = initial_fields.masks_hull(views, 32, 1.0)
+    config = preset("tiny")
+    near = initial_fields.from_hull(hull, config, None, 16, steps=120, seed=1)
+    far = initial_fields.scratch(config, 16, seed=3)
+    refine = RefineConfig(coarse_samples=24, fine_samples=8)
+    start, chosen, losses = initial_fields.closer_start(far, near, views, None, refine)
+    assert chosen == "hull-lirm" and start is near and losses["hull-lirm"] < losses["lirm"], losses
+    start, chosen, losses = initial_fields.closer_start(near, far, views, None, refine)
+    assert chosen == "lirm" and start is near and losses["lirm"] < losses["hull-lirm"], losses
