@@ -41,8 +41,12 @@ def brdf_table(size: int = 32, samples: int = 4096) -> torch.Tensor:
 
 
 class PanoramaLighting(torch.nn.Module):
-    def __init__(self, log_radiance: torch.Tensor, sharpest_lobe_texels: float = 1.0, light_lobes: int = 0):
+    def __init__(self, log_radiance: torch.Tensor, sharpest_lobe_texels: float = 1.0, light_lobes: int = 0,
+                 smoothness_scale: float = 0.0):
         super().__init__()
+        # 0: the smoothness term is the plain total variation of the log radiance; above 0, a step of
+        # log contrast d costs scale * log(1 + d / scale) (`smoothness_loss`).
+        self.smoothness_scale = float(smoothness_scale)
         height, width = log_radiance.shape[:2]
         self.log_radiance = torch.nn.Parameter(log_radiance.clone().float())
         # The texel grid of an environment of this size (its one definition: renderer/environment.py).
@@ -74,18 +78,18 @@ class PanoramaLighting(torch.nn.Module):
 
     @classmethod
     def from_environment(cls, environment: Environment, height: int = 16, sharpest_lobe_texels: float = 1.0,
-                         light_lobes: int = 0) -> "PanoramaLighting":
+                         light_lobes: int = 0, smoothness_scale: float = 0.0) -> "PanoramaLighting":
         """Area-average `environment` down to height x 2 height texels."""
         mean = _area_mean(environment.radiance, environment, height)
-        return cls(torch.from_numpy(np.log(np.maximum(mean, 1e-4))), sharpest_lobe_texels, light_lobes)
+        return cls(torch.from_numpy(np.log(np.maximum(mean, 1e-4))), sharpest_lobe_texels, light_lobes, smoothness_scale)
 
     @classmethod
     def from_capture_lighting(cls, lighting, height: int = 16, sharpest_lobe_texels: float = 1.0,
-                              light_lobes: int = 0) -> "PanoramaLighting":
+                              light_lobes: int = 0, smoothness_scale: float = 0.0) -> "PanoramaLighting":
         """From a capture's estimate (capture_lighting.CaptureLighting): starts as its filled panorama
         and keeps what the photos saw as an observation (`observation_loss`); clipped texels are
         lower bounds only."""
-        panorama = cls.from_environment(lighting.environment, height, sharpest_lobe_texels, light_lobes)
+        panorama = cls.from_environment(lighting.environment, height, sharpest_lobe_texels, light_lobes, smoothness_scale)
         env = lighting.environment
         seen = (lighting.observed > 0).astype(np.float64)
         clipped = seen * lighting.clipped
@@ -112,9 +116,19 @@ class PanoramaLighting(torch.nn.Module):
 
     def smoothness_loss(self) -> torch.Tensor:
         """Total variation of the log radiance (wrapping in longitude): unseen light stays plausible.
-        The compact lights' lobes are not part of it."""
+        The compact lights' lobes are not part of it.
+
+        With a `smoothness_scale` s the variation is heavy-tailed: a step d in log radiance costs
+        s * log(1 + |d| / s), as |d| below s and far less above it. Plain total variation prices a
+        small bright source (a sun no photo saw, 4-5 in log contrast to the sky around it) at its full
+        contrast, so the fit spreads it into a low, broad glow; real skies are smooth almost
+        everywhere with a few sharp edges, the statistics a heavy tail describes."""
         x = self.log_radiance
-        return (x - x.roll(1, dims=1)).abs().mean() + (x[1:] - x[:-1]).abs().mean()
+        steps = torch.cat([(x - x.roll(1, dims=1)).abs().flatten(), (x[1:] - x[:-1]).abs().flatten()])
+        if self.smoothness_scale > 0:
+            steps = self.smoothness_scale * torch.log1p(steps / self.smoothness_scale)
+        across, down = x.shape[0] * x.shape[1] * x.shape[2], (x.shape[0] - 1) * x.shape[1] * x.shape[2]
+        return steps[:across].sum() / across + steps[across:].sum() / down
 
     @property
     def light_lobes(self) -> int:

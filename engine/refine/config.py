@@ -110,6 +110,8 @@ class RefineConfig:
     # Compact lights fitted beside the panorama (panorama_lighting.py: spherical Gaussians outside its
     # smoothness term), for a sun or lamp no photo saw.
     light_lobes: int = 0
+    # The smoothness term's heavy tail (panorama_lighting.smoothness_loss): 0, plain total variation.
+    lighting_smooth_scale: float = 0.25
     # The material prior holds roughness and metallic to the starting field's where that is a
     # prediction (LIRM, an earlier refinement) rather than to 0.5 and 0 (README: what it was worth).
     anchor_materials: bool = True

@@ -95,3 +95,24 @@ def test_a_compact_light_fitted_to_the_shading_of_a_sunlit_object_finds_the_sun(
     axis = torch.nn.functional.normalize(fit.lobe_axes.detach(), dim=-1)[0].numpy()
     sun = PROCEDURAL_ENVIRONMENTS["sky"].sun_direction
     assert np.degrees(np.arccos(np.clip(axis @ sun, -1, 1))) < 25.0
+
+
+
+def test_the_heavy_tailed_smoothness_is_total_variation_for_small_steps_and_lets_a_bright_light_grow():
+    sun = torch.zeros(16, 32, 3)
+    sun[4, 10] = float(np.log(100.0))  # a sun-like texel, 100 x the sky around it
+    plain, heavy = PanoramaLighting(sun), PanoramaLighting(sun, smoothness_scale=0.25)
+    x = plain.log_radiance
+    total_variation = (x - x.roll(1, dims=1)).abs().mean() + (x[1:] - x[:-1]).abs().mean()
+    assert abs(float(plain.smoothness_loss().detach()) - float(total_variation.detach())) < 1e-6  # scale 0: the plain term
+    # What brightening the sun further costs: under plain total variation the same at any contrast, so
+    # the fit would rather spread the light; under the heavy tail a twentieth of it at this contrast.
+    price = []
+    for lighting in (plain, heavy):
+        lighting.smoothness_loss().backward()
+        price.append(float(lighting.log_radiance.grad[4, 10, 0]))
+    assert price[1] < 0.06 * price[0] and price[1] > 0
+    noise = torch.randn(16, 32, 3, generator=torch.Generator().manual_seed(0)) * 0.01
+    faint, faint_plain = PanoramaLighting(noise, smoothness_scale=0.25), PanoramaLighting(noise)
+    ratio = float(faint.smoothness_loss().detach()) / float(faint_plain.smoothness_loss().detach())
+    assert 0.9 < ratio <= 1.0  # small steps cost what they did: faint unseen texels stay smooth
