@@ -123,12 +123,13 @@ class PanoramaLighting(torch.nn.Module):
         small bright source (a sun no photo saw, 4-5 in log contrast to the sky around it) at its full
         contrast, so the fit spreads it into a low, broad glow; real skies are smooth almost
         everywhere with a few sharp edges, the statistics a heavy tail describes."""
+        scale = self.smoothness_scale
+
+        def cost(step: torch.Tensor) -> torch.Tensor:
+            return scale * torch.log1p(step.abs() / scale) if scale > 0 else step.abs()
+
         x = self.log_radiance
-        steps = torch.cat([(x - x.roll(1, dims=1)).abs().flatten(), (x[1:] - x[:-1]).abs().flatten()])
-        if self.smoothness_scale > 0:
-            steps = self.smoothness_scale * torch.log1p(steps / self.smoothness_scale)
-        across, down = x.shape[0] * x.shape[1] * x.shape[2], (x.shape[0] - 1) * x.shape[1] * x.shape[2]
-        return steps[:across].sum() / across + steps[across:].sum() / down
+        return cost(x - x.roll(1, dims=1)).mean() + cost(x[1:] - x[:-1]).mean()
 
     @property
     def light_lobes(self) -> int:

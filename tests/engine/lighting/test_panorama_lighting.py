@@ -97,7 +97,6 @@ def test_a_compact_light_fitted_to_the_shading_of_a_sunlit_object_finds_the_sun(
     assert np.degrees(np.arccos(np.clip(axis @ sun, -1, 1))) < 25.0
 
 
-
 def test_the_heavy_tailed_smoothness_is_total_variation_for_small_steps_and_lets_a_bright_light_grow():
     sun = torch.zeros(16, 32, 3)
     sun[4, 10] = float(np.log(100.0))  # a sun-like texel, 100 x the sky around it
