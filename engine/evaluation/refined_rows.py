@@ -88,7 +88,7 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
     if refine.inverse_rendering:
         lighting = (oracle_lighting(obj, true_lighting) if true_lighting is not None
                     else input_lighting(obj, [i for s in sets for i in s], refine))
-    result = refine_field(refinable, views, refine, grid, lighting=lighting, start_has_materials=init in ("lirm", "hull-lirm", "auto"))
+    result = refine_field(refinable, views, refine, grid, lighting=lighting, start_has_materials=chosen in ("lirm", "hull-lirm"))
     return RefinedObject(result.field.frozen_field(), time.perf_counter() - start, result.steps, views, result.lighting, chosen)
 
 

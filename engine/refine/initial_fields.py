@@ -127,11 +127,11 @@ def photo_loss(refinable: RefinableField, views: RefineViews, grid: OccupancyGri
     field = refinable.field()
     render = render_ray_batch(field, views.origins[index], views.directions[index], grid, 1.0 / config.inv_beta[1],
                               config.coarse_samples, config.fine_samples, generator)
-    # Only the colour and the mask: every other term (regularisers on points this batch does not
-    # sample) must be off, or its mean over no points is NaN and every comparison of starts is False
-    # (which made `--init auto` always take the hull until 2026-11-29).
-    weights = type(config.losses)(colour=1.0, mask=config.losses.mask, eikonal=0.0, curvature=0.0, normal=0.0, albedo=0.0,
-                                  material_prior=0.0, plane_tv=0.0, volume=0.0, floor=0.0, pbr=0.0, shared_materials=0.0)
+    # Only the colour and the mask: no surface points are sampled (eikonal_points 0), and with them
+    # the curvature term's mean over none was NaN, so every comparison of starts was False (which
+    # made `--init auto` always take the hull until 2026-11-29; batch_loss now skips those terms).
+    weights = type(config.losses)(colour=1.0, mask=config.losses.mask, eikonal=0.0, normal=0.0, albedo=0.0,
+                                  material_prior=0.0, plane_tv=0.0)
     loss, _ = batch_loss(field, render, views.colours[index], views.alphas[index], weights, 0, generator)
     if not torch.isfinite(loss):
         raise ValueError(f"the starting field's photo loss is {float(loss)}: its colours or SDF are not finite")

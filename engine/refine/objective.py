@@ -70,7 +70,9 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
     if weights.material_prior and material_anchor is None:
         o = render.opacity.detach()
         terms["material_prior"] = ((render.roughness - 0.5 * o) ** 2 + render.metallic**2).mean()
-    if (weights.eikonal or weights.normal or weights.curvature or weights.albedo_smooth) and render.surface_points.shape[0]:
+    # Terms on sampled surface points need some: with none (eikonal_points 0) their means would be NaN.
+    if ((weights.eikonal or weights.normal or weights.curvature or weights.albedo_smooth)
+            and render.surface_points.shape[0] and eikonal_points > 0):
         points = render.surface_points
         if points.shape[0] > eikonal_points:
             points = points[torch.randint(0, points.shape[0], (eikonal_points,), generator=generator)]

@@ -137,3 +137,23 @@ def test_neighbours_stay_in_their_view_and_within_the_radius():
     assert int((y - y2).abs().max()) <= 3 and int((x - x2).abs().max()) <= 3
     interior = (y >= 3) & (y < size - 3) & (x >= 3) & (x < size - 3)
     assert not bool((near == index)[interior].any())  # never the pixel itself where there is room
+
+
+def test_terms_on_surface_points_are_left_out_when_none_are_sampled():
+    """With no surface points to sample (eikonal_points 0, as the starts' comparison asks), the loss
+    is the other terms' sum, not NaN: a NaN made every comparison of starts False."""
+    from lirm.engine.model.analytic_fields import SphereField
+    from lirm.engine.refine.config import LossWeights
+    from lirm.engine.refine.objective import batch_loss
+    from lirm.engine.refine.ray_rendering import RayBatchRender
+
+    n = 8
+    on_sphere = 0.5 * torch.nn.functional.normalize(torch.randn(n, 3, generator=torch.Generator().manual_seed(0)), dim=-1)
+    render = RayBatchRender(torch.full((n, 3), 0.5), torch.ones(n), torch.zeros(n, 3), torch.zeros(n), torch.zeros(n),
+                            torch.zeros(n, 3), torch.zeros(n), on_sphere, 0)
+    total, terms = batch_loss(SphereField(0.5), render, torch.ones(n, 3), torch.ones(n), LossWeights(), 0,
+                              torch.Generator().manual_seed(1))
+    assert torch.isfinite(total) and "curvature" not in terms and "eikonal" not in terms, terms
+    weights = LossWeights()
+    assert abs(float(total) - sum(getattr(weights, name) * value for name, value in terms.items())) < 1e-6
+    assert abs(terms["colour"] - 0.5) < 1e-6
