@@ -15,7 +15,7 @@ from lirm.engine.cameras import Camera
 from lirm.engine.capture.alignment import similarity_align
 from lirm.engine.capture.capture_folder import Capture
 from lirm.engine.errors import LirmUserError
-from lirm.engine.evaluation.lighting_accuracy import LightingAccuracy, compare_lighting
+from lirm.engine.evaluation.lighting_accuracy import ELEVATION_BANDS, LightingAccuracy, chromaticity, compare_lighting
 
 
 @dataclass
@@ -30,6 +30,11 @@ class LightingBenchResult:
         lines = [f"capture lighting ({self.source}) against the shoot's true environment ({self.environment}):",
                  f"  brightest 1%: {a.brightest_angle_deg:.1f} degrees from the truth (goal: within 20)",
                  f"  irradiance on an upward-facing plane: {a.up_irradiance_ratio:.2f} x the truth (goal: 0.75-1.25)"]
+        bands = ", ".join(f"{lo:g}-{hi:g} deg {e:.2f} / {t:.2f}" for (lo, hi), e, t
+                          in zip(ELEVATION_BANDS, a.estimated_by_elevation, a.true_by_elevation))
+        lines.append(f"    from each band of elevation (this / truth, luminance): {bands}")
+        shares = lambda rgb: " / ".join(f"{c:.2f}" for c in chromaticity(rgb))  # noqa: E731
+        lines.append(f"    its colour (r / g / b shares): {shares(a.estimated_up_irradiance)}, truth {shares(a.true_up_irradiance)}")
         if self.seen_fraction is not None:
             lines.append(f"  directions the photos saw: {100 * self.seen_fraction:.0f}% (the rest is filled, not measured)")
         return "\n".join(lines)

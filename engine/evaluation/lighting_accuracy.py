@@ -1,5 +1,6 @@
 """How close an estimated environment is to the true one: where its brightest light is, and how
-much light it sends onto an upward-facing plane (issue 19's two figures)."""
+much light it sends onto an upward-facing plane (issue 19's two figures); and, to say why they are
+off, where that plane's light comes from by elevation (a sun's band, a sky's) and its colour."""
 
 from __future__ import annotations
 
@@ -10,6 +11,9 @@ import numpy as np
 from lirm.renderer.environment import Environment
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+# Elevation bands (degrees) the up-plane irradiance is split over: the horizon's, the low sky's, a
+# mid-height sun's and the zenith's.
+ELEVATION_BANDS = ((0.0, 10.0), (10.0, 30.0), (30.0, 60.0), (60.0, 90.0))
 
 
 def brightest_direction(environment: Environment, fraction: float = 0.01, to_frame: np.ndarray | None = None) -> np.ndarray:
@@ -37,12 +41,33 @@ def up_irradiance(environment: Environment, to_frame: np.ndarray | None = None, 
     return (environment.radiance.reshape(-1, 3) * (cosine * solid_angle.ravel())[:, None]).sum(0)
 
 
+def up_irradiance_by_elevation(environment: Environment, to_frame: np.ndarray | None = None,
+                               bands=ELEVATION_BANDS) -> np.ndarray:
+    """(len(bands),) luminance irradiance on an upward-facing plane from the directions of each band
+    of elevation (degrees, lower bound included); over bands covering 0-90 they sum to up_irradiance's."""
+    dirs, solid_angle = environment.texel_directions()
+    dirs = dirs.reshape(-1, 3)
+    if to_frame is not None:
+        dirs = dirs @ np.asarray(to_frame).T
+    elevation = np.degrees(np.arcsin(np.clip(dirs[:, 2], -1.0, 1.0)))
+    contribution = (environment.radiance.reshape(-1, 3) @ LUMINANCE) * np.clip(dirs[:, 2], 0.0, None) * solid_angle.ravel()
+    return np.array([contribution[(elevation >= lo) & ((elevation < hi) | (hi >= 90.0))].sum() for lo, hi in bands])
+
+
+def chromaticity(rgb: np.ndarray) -> np.ndarray:
+    """r, g, b shares of an RGB quantity (summing to 1): its colour without its brightness."""
+    rgb = np.asarray(rgb, dtype=np.float64)
+    return rgb / max(float(rgb.sum()), 1e-12)
+
+
 @dataclass
 class LightingAccuracy:
     brightest_angle_deg: float  # between the brightest 1%'s mean directions
     up_irradiance_ratio: float  # estimated / true, luminance
     estimated_up_irradiance: np.ndarray
     true_up_irradiance: np.ndarray
+    estimated_by_elevation: np.ndarray  # luminance up-plane irradiance per ELEVATION_BANDS band
+    true_by_elevation: np.ndarray
 
     def meets_goal(self, angle_deg: float = 20.0, irradiance_tolerance: float = 0.25) -> bool:
         return self.brightest_angle_deg <= angle_deg and abs(self.up_irradiance_ratio - 1.0) <= irradiance_tolerance
@@ -55,4 +80,5 @@ def compare_lighting(estimate: Environment, truth: Environment, estimate_to_trut
     angle = float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))
     e_est = up_irradiance(estimate, to_frame=estimate_to_truth)
     e_true = up_irradiance(truth)
-    return LightingAccuracy(angle, float((e_est @ LUMINANCE) / max(e_true @ LUMINANCE, 1e-12)), e_est, e_true)
+    return LightingAccuracy(angle, float((e_est @ LUMINANCE) / max(e_true @ LUMINANCE, 1e-12)), e_est, e_true,
+                            up_irradiance_by_elevation(estimate, to_frame=estimate_to_truth), up_irradiance_by_elevation(truth))
