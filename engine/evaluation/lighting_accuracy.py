@@ -16,13 +16,19 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 ELEVATION_BANDS = ((0.0, 10.0), (10.0, 30.0), (30.0, 60.0), (60.0, 90.0))
 
 
+def _texel_directions(environment: Environment, to_frame: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """(texels, 3) unit directions, rotated by `to_frame` (3x3) when given, and (texels,) solid angles."""
+    dirs, solid_angle = environment.texel_directions()
+    dirs = dirs.reshape(-1, 3)
+    if to_frame is not None:
+        dirs = dirs @ np.asarray(to_frame).T
+    return dirs, solid_angle.ravel()
+
+
 def brightest_direction(environment: Environment, fraction: float = 0.01, to_frame: np.ndarray | None = None) -> np.ndarray:
     """Unit mean direction of the brightest `fraction` of the sphere (by solid angle), weighted by
     luminance x solid angle. `to_frame` (3x3) rotates the environment's directions first."""
-    dirs, solid_angle = environment.texel_directions()
-    dirs, solid_angle = dirs.reshape(-1, 3), solid_angle.ravel()
-    if to_frame is not None:
-        dirs = dirs @ np.asarray(to_frame).T
+    dirs, solid_angle = _texel_directions(environment, to_frame)
     luminance = environment.radiance.reshape(-1, 3) @ LUMINANCE
     order = np.argsort(-luminance)
     cumulative = np.cumsum(solid_angle[order])
@@ -33,24 +39,18 @@ def brightest_direction(environment: Environment, fraction: float = 0.01, to_fra
 
 def up_irradiance(environment: Environment, to_frame: np.ndarray | None = None, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     """RGB irradiance on a plane facing `up`: the integral of L cos(theta) over its hemisphere."""
-    dirs, solid_angle = environment.texel_directions()
-    dirs = dirs.reshape(-1, 3)
-    if to_frame is not None:
-        dirs = dirs @ np.asarray(to_frame).T
+    dirs, solid_angle = _texel_directions(environment, to_frame)
     cosine = np.clip(dirs @ np.asarray(up, dtype=np.float64), 0.0, None)
-    return (environment.radiance.reshape(-1, 3) * (cosine * solid_angle.ravel())[:, None]).sum(0)
+    return (environment.radiance.reshape(-1, 3) * (cosine * solid_angle)[:, None]).sum(0)
 
 
 def up_irradiance_by_elevation(environment: Environment, to_frame: np.ndarray | None = None,
                                bands=ELEVATION_BANDS) -> np.ndarray:
     """(len(bands),) luminance irradiance on an upward-facing plane from the directions of each band
     of elevation (degrees, lower bound included); over bands covering 0-90 they sum to up_irradiance's."""
-    dirs, solid_angle = environment.texel_directions()
-    dirs = dirs.reshape(-1, 3)
-    if to_frame is not None:
-        dirs = dirs @ np.asarray(to_frame).T
+    dirs, solid_angle = _texel_directions(environment, to_frame)
     elevation = np.degrees(np.arcsin(np.clip(dirs[:, 2], -1.0, 1.0)))
-    contribution = (environment.radiance.reshape(-1, 3) @ LUMINANCE) * np.clip(dirs[:, 2], 0.0, None) * solid_angle.ravel()
+    contribution = (environment.radiance.reshape(-1, 3) @ LUMINANCE) * np.clip(dirs[:, 2], 0.0, None) * solid_angle
     return np.array([contribution[(elevation >= lo) & ((elevation < hi) | (hi >= 90.0))].sum() for lo, hi in bands])
 
 
