@@ -14,12 +14,13 @@ budget=${1:-540}
 t0=$(date +%s)
 left() { echo $((budget - ($(date +%s) - t0))); }
 OUT=${OUT:-/tmp/out}
-mkdir -p "$OUT" /tmp/slice
-log=/tmp/slice/log.txt
+work=${SLICE_WORK:-/tmp/slice}  # the run, its logs and the slim copy before they are packed into $OUT
+mkdir -p "$OUT" "$work"
+log="$work/log.txt"
 exec > >(tee -a "$log") 2>&1
 export PYTHONUNBUFFERED=1
 
-device=${DEVICE:-cuda}  # DEVICE=cpu: a dry run of the plumbing here (nothing installed, tiny budgets)
+device=${DEVICE:-cuda}  # DEVICE=cpu: a dry run of the plumbing here (nothing installed, tiny budgets; tests/engine/train/test_gpu_slice.py)
 if [ "$device" = cuda ]; then
   for f in .gl/*.deb; do dpkg -x "$f" /; done; ldconfig
   python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl &&
@@ -36,14 +37,14 @@ echo "[$(left) s left] installed"
 # Update-loop timings (bf16 autocast on CUDA), each bounded so a hang cannot eat the slice; measured in
 # the first slice (README, "The model"), so only with TIMINGS=1 (80 s of the slice).
 if [ "${TIMINGS:-0}" = 1 ]; then
-  timeout ${T_BENCH:-60} $lirm bench model --preset paper --device $device --updates 4 --no-baseline --json /tmp/slice/bench_paper512.json
-  timeout ${T_BENCH:-45} $lirm bench model --preset paper --device $device --updates 4 --no-baseline --image-size 256 --json /tmp/slice/bench_paper256.json
-  timeout ${T_BENCH:-45} $lirm bench model --preset small --device $device --updates 4 --no-baseline --json /tmp/slice/bench_small.json
+  timeout ${T_BENCH:-60} $lirm bench model --preset paper --device $device --updates 4 --no-baseline --json "$work/bench_paper512.json"
+  timeout ${T_BENCH:-45} $lirm bench model --preset paper --device $device --updates 4 --no-baseline --image-size 256 --json "$work/bench_paper256.json"
+  timeout ${T_BENCH:-45} $lirm bench model --preset small --device $device --updates 4 --no-baseline --json "$work/bench_small.json"
 fi
 # The training step itself (the slice's batch, both checkpointing settings, a profile): TRAIN_BENCH=1 (about 90 s).
 if [ "${TRAIN_BENCH:-0}" = 1 ]; then
   timeout ${T_TRAIN_BENCH:-150} $lirm bench train --preset small --device $device --batch-scenes "${BATCH_SCENES:-16}" \
-    --checkpointing both --steps 2 --profile --json /tmp/slice/bench_train.json 2>&1 | grep -v USDT
+    --checkpointing both --steps 2 --profile --json "$work/bench_train.json" 2>&1 | grep -v USDT
 fi
 # One process's synthetic-scene rate on this machine's EGL (the training runs many such processes).
 timeout ${T_BENCH:-45} $lirm bench synth --scenes 6 --views 8 --size 256
@@ -57,8 +58,8 @@ resume=()
 views=(--scene-views "${SCENE_VIEWS:-12}")
 [ -f resources/checkpoints/lirm-small-resume.safetensors ] && resume=(--resume resources/checkpoints/lirm-small-resume.safetensors)
 $lirm train --preset "${PRESET:-small}" --stage 1 --stage-steps "${STAGE_STEPS:-3000}" --batch-scenes "${BATCH_SCENES:-16}" \
-  --workers "${WORKERS:-8}" --device $device --out /tmp/slice/run --checkpoint-every "${CHECKPOINT_EVERY:-100}" \
-  --eval-every "${EVAL_EVERY:-100}" --eval-objects 2 --slim-copy /tmp/slice/slim.safetensors "${resume[@]}" "${views[@]}" &
+  --workers "${WORKERS:-8}" --device $device --out "$work/run" --checkpoint-every "${CHECKPOINT_EVERY:-100}" \
+  --eval-every "${EVAL_EVERY:-100}" --eval-objects 2 --slim-copy "$work/slim.safetensors" "${resume[@]}" "${views[@]}" &
 pid=$!
 # The deadline is kept whatever the trainer is doing: a first SIGINT (to the trainer alone) stops at
 # the end of its step with a checkpoint; a second, 25 s later, interrupts a step still waiting for its
@@ -70,7 +71,7 @@ wait $pid
 echo "[$(left) s left] training returned $?"
 kill $watchdog 2>/dev/null
 
-cp /tmp/slice/run/metrics.csv /tmp/slice/run/eval.csv /tmp/slice/run/stage1_run.json /tmp/slice/run/loss_curves.png /tmp/slice/ 2>/dev/null
-[ -f /tmp/slice/slim.safetensors ] && split -b 15M -d /tmp/slice/slim.safetensors "$OUT/slim.part"
-tar -C /tmp/slice -czf "$OUT/logs.tar.gz" --exclude run --exclude slim.safetensors .
+cp "$work/run"/metrics.csv "$work/run"/eval.csv "$work/run"/stage1_run.json "$work/run"/loss_curves.png "$work/" 2>/dev/null
+[ -f "$work/slim.safetensors" ] && split -b 15M -d "$work/slim.safetensors" "$OUT/slim.part"
+tar -C "$work" -czf "$OUT/logs.tar.gz" --exclude run --exclude slim.safetensors .
 echo "[$(left) s left] packed: $(ls "$OUT")"

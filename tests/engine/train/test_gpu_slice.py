@@ -1,0 +1,49 @@
+"""The GPU slice's one command (engine/train/gpu_slice.sh), run here as its CPU dry run.
+
+A GPU slice is lent now and then, for minutes; a slice that fails on a renamed option or a broken
+resume is lost. So the exact script the device runs is run here with DEVICE=cpu: it must resume the
+repository's `small` weights, train on, stop at its deadline, and bring back the split float16 copy
+and the logs, and the joined copy must resume again, at a later step.
+"""
+
+import os
+import subprocess
+import sys
+import tarfile
+from pathlib import Path
+
+import pytest
+
+from lirm.engine.train.training_checkpoint import load_resume_point
+
+pytestmark = pytest.mark.slow
+
+ROOT = Path(__file__).resolve().parents[3]
+RESUME = ROOT / "resources" / "checkpoints" / "lirm-small-resume.safetensors"
+
+
+@pytest.mark.skipif(not RESUME.exists(), reason="no `small` weights to resume in this checkout")
+def test_a_slice_dry_run_resumes_trains_and_brings_back_weights_that_resume_later(tmp_path):
+    out, work = tmp_path / "out", tmp_path / "work"
+    env = dict(os.environ, DEVICE="cpu", OUT=str(out), SLICE_WORK=str(work), BATCH_SCENES="1", WORKERS="1",
+               PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}")
+    # Output to a file, not a pipe: the script's deadline watchdog may outlive it by a few seconds.
+    with open(tmp_path / "slice.log", "w") as log:
+        done = subprocess.run(["bash", "engine/train/gpu_slice.sh", "180"], cwd=ROOT, env=env, stdout=log,
+                              stderr=subprocess.STDOUT, timeout=420)
+    text = (tmp_path / "slice.log").read_text()
+    assert done.returncode == 0, text[-3000:]
+    assert "continuing stage 1 from step" in text, text[-3000:]
+
+    parts = sorted(out.glob("slim.part*"))
+    assert parts, text[-3000:]
+    joined = tmp_path / "slim.safetensors"
+    joined.write_bytes(b"".join(p.read_bytes() for p in parts))
+    before, after = load_resume_point(RESUME, "small"), load_resume_point(joined, "small")
+    assert after.stage == 1 and after.moments_dropped
+    assert after.step > before.step
+    assert joined.stat().st_size <= 50 * 2**20  # what the repository keeps: fp16, at most 50 MB
+
+    with tarfile.open(out / "logs.tar.gz") as logs:
+        names = {Path(n).name for n in logs.getnames()}
+    assert {"log.txt", "metrics.csv", "stage1_run.json"} <= names, names
