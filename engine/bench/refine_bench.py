@@ -59,7 +59,12 @@ def apply_options(config: RefineConfig, options: list[str]) -> RefineConfig:
     return config
 
 
-def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfig, base: RefineConfig, minutes: list[float],
+def budget_label(minutes: float | None, config: RefineConfig) -> str:
+    """A budget as the tables print it: minutes of wall clock, or a fixed count of steps (minutes None)."""
+    return f"{minutes:g} min" if minutes is not None else f"{config.iterations} steps"
+
+
+def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfig, base: RefineConfig, minutes: list[float | None],
                      init: str, progress=None, pictures: Path | None = None, true_lighting: bool = False,
                      texture_fit: str = "on", swap_study: bool = False) -> dict:
     """With base.inverse_rendering, also the material and relighting scores (and, with `pictures`,
@@ -68,7 +73,9 @@ def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfi
     test's export fits its textures to the input photos (RelightConfig.fit_textures), "off", "both"
     (the baked export scored too, under baked_ keys) or "search-both" (the fit without its metal search
     scored too, under plain_ keys); `swap_study`: also the relighting with parts swapped for the truth's
-    (relight_swaps.py; the objects must carry the truth's G-buffers), under swap_ keys."""
+    (relight_swaps.py; the objects must carry the truth's G-buffers), under swap_ keys. A budget of None
+    runs base.iterations steps with no wall-clock budget: the schedule then follows the steps alone, and
+    the fit is the same on any machine (with a wall-clock budget it follows the time, even at step 0)."""
     meter = PeakMemory("cpu" if base.device == "cpu" else "cuda")
     budgets = []
     relighter = None
@@ -84,15 +91,16 @@ def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfi
         SWAP_KEYS if swap_study else ())
     try:
         for k, budget in enumerate(minutes):
+            label = budget_label(budget, base)
             if progress:
-                progress(f"{budget:g} min", k, len(minutes))
+                progress(label, k, len(minutes))
             config = replace(base, minutes=budget)
             if relighter is not None:
-                relighter.row = f"{init} {budget:g} min"
+                relighter.row = f"{init} {label}"
             release_memory(meter.device)
             meter.reset()
             rows = per_object_scores(model, objects, eval_config, config, init, relighter, true_lighting)
-            budgets.append({"minutes": budget, "peak_bytes": meter.peak(), "objects": rows, **{key: mean_of(rows, key) for key in keys}})
+            budgets.append({"minutes": budget, "budget": label, "peak_bytes": meter.peak(), "objects": rows, **{key: mean_of(rows, key) for key in keys}})
         if progress:
             progress("done", len(minutes), len(minutes))
     finally:
@@ -107,38 +115,38 @@ def refine_bench_table(result: dict, set_name: str) -> str:
     lit = " under the inputs' true lighting (oracle)" if result.get("lighting") == "truth" else ""
     lines = [f"Refinement from {result['init']}{lit} on the {set_name} set, {len(first)} objects "
              f"({', '.join(r['object'] for r in first)}); means over objects:", "",
-             "| budget (min) | PSNR ↑ | SSIM ↑ | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ | CD ↓ | steps | seconds "
+             "| budget | PSNR ↑ | SSIM ↑ | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ | CD ↓ | steps | seconds "
              "| peak memory (GB) |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for b in result["budgets"]:
-        lines.append(f"| {b['minutes']:g} | {b['psnr']:.2f} | {b['ssim']:.3f} | {b['albedo_psnr']:.2f} | {b['roughness_psnr']:.2f} | "
+        lines.append(f"| {b['budget']} | {b['psnr']:.2f} | {b['ssim']:.3f} | {b['albedo_psnr']:.2f} | {b['roughness_psnr']:.2f} | "
                      f"{b['metallic_psnr']:.2f} | {b['chamfer']:.4f} | {b['steps']:.0f} | {b['seconds']:.0f} | "
                      f"{b['peak_bytes'] / 1e9:.2f} |")
     if result["budgets"] and "relight_psnr_l" in result["budgets"][0]:
         lines += ["", "The relighting test (materials inverse-rendered):", "",
-                  "| budget (min) | relight PSNR-H ↑ | relight PSNR-L ↑ |", "|---|---|---|"]
+                  "| budget | relight PSNR-H ↑ | relight PSNR-L ↑ |", "|---|---|---|"]
         for b in result["budgets"]:
-            lines.append(f"| {b['minutes']:g} | {b['relight_psnr_h']:.2f} | {b['relight_psnr_l']:.2f} |")
+            lines.append(f"| {b['budget']} | {b['relight_psnr_h']:.2f} | {b['relight_psnr_l']:.2f} |")
         for prefix, what in (("baked_", "with the field's baked textures, not fitted to the photos"),
                              ("plain_", "with the textures fitted to the photos without the metal search")):
             if f"{prefix}relight_psnr_l" not in result["budgets"][0]:
                 continue
             lines += ["", f"The same refined fields exported {what}:", "",
-                      "| budget (min) | relight PSNR-H ↑ | relight PSNR-L ↑ |", "|---|---|---|"]
+                      "| budget | relight PSNR-H ↑ | relight PSNR-L ↑ |", "|---|---|---|"]
             for b in result["budgets"]:
-                lines.append(f"| {b['minutes']:g} | {b[prefix + 'relight_psnr_h']:.2f} | {b[prefix + 'relight_psnr_l']:.2f} |")
+                lines.append(f"| {b['budget']} | {b[prefix + 'relight_psnr_h']:.2f} | {b[prefix + 'relight_psnr_l']:.2f} |")
     if result["budgets"] and "swap_export_relight_psnr_l" in result["budgets"][0]:
         lines += ["", "Where the relighting error comes from (the export relit with parts swapped for the truth's; "
                   "relight_swaps.py), PSNR-L / PSNR-H:", "",
-                  "| budget (min) | " + " | ".join(SWAPS) + " |", "|---|" + "---|" * len(SWAPS)]
+                  "| budget | " + " | ".join(SWAPS) + " |", "|---|" + "---|" * len(SWAPS)]
         for b in result["budgets"]:
-            lines.append(f"| {b['minutes']:g} | " + " | ".join(
+            lines.append(f"| {b['budget']} | " + " | ".join(
                 f"{b[f'swap_{name}_relight_psnr_l']:.2f} / {b[f'swap_{name}_relight_psnr_h']:.2f}" for name in SWAPS) + " |")
         lines += ["", "The export's own materials against the truth's (its G-buffers from the same output views; the table "
                   "above scores the refined field's):", "",
-                  "| budget (min) | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ |", "|---|---|---|---|"]
+                  "| budget | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ |", "|---|---|---|---|"]
         for b in result["budgets"]:
-            lines.append(f"| {b['minutes']:g} | " + " | ".join(f"{b[key]:.2f}" for key in EXPORTED_MATERIAL_KEYS) + " |")
+            lines.append(f"| {b['budget']} | " + " | ".join(f"{b[key]:.2f}" for key in EXPORTED_MATERIAL_KEYS) + " |")
     return "\n".join(lines) + "\n"
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
 from ...errors import LirmUsageError
@@ -18,6 +19,10 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--size", type=int, default=128, help="side of the protocol views and of the input crops (default 128)")
     parser.add_argument("--output-views", type=int, default=6, help="output views scored per object (default 6 of 12)")
     parser.add_argument("--minutes", type=float, nargs="+", default=[0.5, 1.0, 3.0, 10.0], help="budgets (default 0.5 1 3 10)")
+    parser.add_argument("--steps", type=int, metavar="N",
+                        help="instead of --minutes: each fit runs exactly N steps, its schedule following the steps alone, "
+                             "so that the same inputs give the same fit on any machine and two settings compare at "
+                             "equal steps whatever the machine's pace")
     parser.add_argument("--init", choices=("lirm", "hull", "hull-lirm", "scratch", "auto"), default="lirm",
                         help="start from (default lirm; hull-lirm: the hull's shape with LIRM's materials; auto: whichever "
                              "of the two agrees better with the inputs, as `lirm refine` starts a capture)")
@@ -65,6 +70,8 @@ def run(args: argparse.Namespace) -> int:
     if args.lighting == "truth" and args.warm_start:
         raise LirmUsageError("--lighting truth is for the budget table, not --warm-start")
     require_range(args, "size", VIEW_SIZE, " pixels")
+    if args.steps is not None and (args.steps < 1 or args.warm_start):
+        raise LirmUsageError(f"--steps must be at least 1 (and is for the budget table, not --warm-start), got {args.steps}")
     if any(not m > 0 for m in args.minutes):
         raise LirmUsageError(f"--minutes must all be positive, got {args.minutes}")
     source = model_with_warning(args.checkpoint)
@@ -82,9 +89,12 @@ def run(args: argparse.Namespace) -> int:
             bar.close()
         table = warm_start_table(result)
     else:
-        bar = view_progress_bar(len(args.minutes), "refinement budgets")
+        budgets = [None] if args.steps is not None else args.minutes
+        if args.steps is not None:
+            base = replace(base, iterations=args.steps)
+        bar = view_progress_bar(len(budgets), "refinement budgets")
         try:
-            result = run_refine_bench(source.model, objects, EvalConfig(output_views=args.output_views), base, args.minutes,
+            result = run_refine_bench(source.model, objects, EvalConfig(output_views=args.output_views), base, budgets,
                                       args.init, progress=bar_updater(bar), pictures=args.pictures,
                                       true_lighting=args.lighting == "truth", texture_fit=args.texture_fit,
                                       swap_study=args.swap_study)

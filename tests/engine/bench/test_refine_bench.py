@@ -18,8 +18,8 @@ def test_bench_refine_with_materials_scores_them_and_draws_the_relighting(tmp_pa
                  "--init", "hull", "--materials", "--pictures", str(tmp_path / "pictures"), "--json", str(tmp_path / "r.json"),
                  "--texture-fit", texture_fit]) == 0
     table = capsys.readouterr().out
-    assert "| budget (min) | PSNR ↑ | SSIM ↑ | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ | CD ↓ |" in table
-    assert "| budget (min) | relight PSNR-H ↑ | relight PSNR-L ↑ |" in table
+    assert "| budget | PSNR ↑ | SSIM ↑ | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ | CD ↓ |" in table
+    assert "| budget | relight PSNR-H ↑ | relight PSNR-L ↑ |" in table
     budget = json.loads((tmp_path / "r.json").read_text())["budgets"][0]
     assert all(np.isfinite(budget[k]) for k in ("roughness_psnr", "metallic_psnr", "relight_psnr_h", "relight_psnr_l"))
     # --texture-fit both: the same field's export with its baked textures is scored too, apart; search-both:
@@ -63,3 +63,23 @@ def test_bench_refine_swap_study_takes_the_relighting_apart(tmp_path, capsys):
     # The export's own materials are scored beside it (a short hull refinement: no better than chance, but measured).
     exported = {k: budget[k] for k in ("exported_albedo_psnr", "exported_roughness_psnr", "exported_metallic_psnr")}
     assert all(np.isfinite(v) and 0.0 < v < 60.0 for v in exported.values()), exported
+
+
+def test_bench_refine_at_a_fixed_step_count_gives_the_same_fit_twice(tmp_path, capsys):
+    """With a wall-clock budget the schedule follows the time (even its first step), so no two runs are
+    alike; --steps makes a fit a function of its inputs and settings alone."""
+    runs = []
+    for k in range(2):
+        assert main(["bench", "refine", "--objects", "1", "--size", "48", "--output-views", "1", "--steps", "12",
+                     "--init", "hull", "--json", str(tmp_path / f"r{k}.json")]) == 0
+        runs.append(json.loads((tmp_path / f"r{k}.json").read_text())["budgets"][0])
+    assert "| 12 steps |" in capsys.readouterr().out
+    first, second = runs
+    assert first["steps"] == second["steps"] == 12 and first["minutes"] is None
+    for key in ("psnr", "ssim", "albedo_psnr", "chamfer"):
+        assert first[key] == second[key], key
+
+
+def test_bench_refine_steps_must_be_positive(capsys):
+    assert main(["bench", "refine", "--objects", "1", "--steps", "0"]) == 2
+    assert "--steps must be at least 1" in capsys.readouterr().err
