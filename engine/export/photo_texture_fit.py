@@ -357,7 +357,7 @@ def _fit(shading: _Shading, start: _Logits, config: TextureFitConfig, steps: int
     groups = [{"params": params, "lr": config.learning_rate}]
     if warps is not None:
         groups.append({"params": list(warps.parameters()), "lr": registration.learning_rate})
-    optimiser = torch.optim.Adam(groups)
+    optimiser = torch.optim.Adam(groups, fused=True)  # as the refinement's (refiner.py)
     taken, stopped = 0, False
     with torch.enable_grad():  # callers score under no_grad (the evaluation); this fit needs its gradients
         for step in range(steps):

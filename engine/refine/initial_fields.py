@@ -65,7 +65,8 @@ def from_hull(hull: CarvedHullState, config: LIRMConfig, heads: FieldHeads | Non
     surface = torch.from_numpy(_surface_points(hull.occupancy, config.radius)).float()
     optimiser = torch.optim.Adam([{"params": [refinable.planes], "lr": 2e-2},
                                   {"params": list(refinable.heads.parameters()), "lr": 2e-3}]
-                                 + ([{"params": [refinable.panoramas], "lr": 1e-2}] if refinable.panoramas is not None else []))
+                                 + ([{"params": [refinable.panoramas], "lr": 1e-2}] if refinable.panoramas is not None else []),
+                                 fused=True)
     voxel = 2.0 * config.radius / hull.occupancy.shape[0]
     for _ in range(steps):
         if cancel is not None and cancel():

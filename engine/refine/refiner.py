@@ -60,7 +60,9 @@ def _optimiser(refinable: RefinableField, config: RefineConfig, lighting=None) -
         groups.append({"params": [refinable.panoramas], "lr": config.nde_lr, "base_lr": config.nde_lr})
     if lighting is not None and list(lighting.parameters()):  # a fixed (known) lighting has nothing to fit
         groups.append({"params": list(lighting.parameters()), "lr": config.lighting_lr, "base_lr": config.lighting_lr})
-    return torch.optim.Adam(groups, betas=(0.9, 0.99), eps=1e-15)
+    # fused: one kernel over each tensor instead of a dozen passes; the planes' 3.5M values at 192² took
+    # 10.4 ms a step with the default implementation and 3.1 ms fused on the 2-core CPU (README).
+    return torch.optim.Adam(groups, betas=(0.9, 0.99), eps=1e-15, fused=True)
 
 
 def _material_anchor(start, device: torch.device) -> Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]]:

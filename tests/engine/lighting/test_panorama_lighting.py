@@ -64,7 +64,7 @@ def test_below_the_sharpest_lobe_roughness_changes_nothing_and_a_finer_floor_let
 def test_a_compact_light_keeps_its_energy_and_stays_outside_the_smoothness_term():
     lighting = PanoramaLighting(torch.zeros(16, 32, 3), light_lobes=2)
     assert lighting.light_lobes == 2
-    smooth_before = float(lighting.smoothness_loss())
+    smooth_before = float(lighting.smoothness_loss().detach())
     energies = []
     for sharpness in (2.0, 30.0, 100.0):  # broad to about a texel wide
         with torch.no_grad():
