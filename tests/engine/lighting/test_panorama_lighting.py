@@ -70,7 +70,7 @@ def test_a_compact_light_keeps_its_energy_and_stays_outside_the_smoothness_term(
         with torch.no_grad():
             lighting.lobe_log_sharpness.fill_(np.log(sharpness))
             lighting.lobe_axes.copy_(torch.tensor([[0.31, 0.17, 0.93], [0.9, -0.1, 0.3]]))
-        lobes = lighting.lobe_radiance()
+        lobes = lighting.lobe_radiance().detach()
         energies.append(float((lobes[:, 0] * lighting.solid_angle).sum()))
         exact = 2 * (2 * np.pi * (1 - np.exp(-2 * sharpness)) / sharpness)  # two lobes of peak 1 (exp(0))
         assert abs(energies[-1] - exact) < 1e-3 * exact
