@@ -76,7 +76,7 @@ def test_a_compact_light_keeps_its_energy_and_stays_outside_the_smoothness_term(
         assert abs(energies[-1] - exact) < 1e-3 * exact
     total = lighting.environment().radiance
     assert total.max() > 1.5 and total.min() >= 1.0 - 1e-6  # the lobes add to the panorama's texels
-    assert float(lighting.smoothness_loss()) == smooth_before == 0.0
+    assert float(lighting.smoothness_loss().detach()) == smooth_before == 0.0
 
 
 def test_a_compact_light_fitted_to_the_shading_of_a_sunlit_object_finds_the_sun():
