@@ -65,7 +65,7 @@ class FieldPreview:
         import torch
 
         from lirm.engine.model.occupancy_grid import OccupancyConfig, OccupancyGrid
-        from lirm.engine.model.volume_renderer import VolumeRenderConfig, render_camera
+        from lirm.engine.model.volume_renderer import VolumeRenderConfig, as_fitted, render_camera
 
         while True:
             with self._lock:
@@ -75,7 +75,7 @@ class FieldPreview:
             key, capture_dir, update, checkpoint, camera = wanted
             try:
                 field = self._decoded(capture_dir, update, checkpoint)
-                config = VolumeRenderConfig(samples_per_ray=self.samples_per_ray, numerical_normals=False)
+                config = as_fitted(VolumeRenderConfig(samples_per_ray=self.samples_per_ray, numerical_normals=False), field)
                 with torch.inference_mode():
                     grid = OccupancyGrid.build(field, field.radius, config.beta, 2.0 * field.radius / config.samples_per_ray,
                                                OccupancyConfig(resolution=64))

@@ -89,9 +89,9 @@ def run(args: argparse.Namespace) -> int:
             bar.close()
         table = warm_start_table(result)
     else:
-        budgets = [None] if args.steps is not None else args.minutes
-        if args.steps is not None:
-            base = replace(base, iterations=args.steps)
+        budgets = args.minutes
+        if args.steps is not None:  # one fit of exactly that many steps, no time budget
+            budgets, base = [None], replace(base, iterations=args.steps)
         bar = view_progress_bar(len(budgets), "refinement budgets")
         try:
             result = run_refine_bench(source.model, objects, EvalConfig(output_views=args.output_views), base, budgets,

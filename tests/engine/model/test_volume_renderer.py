@@ -14,7 +14,7 @@ from lirm.engine.model.analytic_fields import BoxField, SphereField, box_ray_hit
 from lirm.engine.model.config import preset
 from lirm.engine.model.lirm import LIRM
 from lirm.engine.model.occupancy_grid import OccupancyConfig, OccupancyGrid
-from lirm.engine.model.volume_renderer import VolumeRenderConfig, numerical_normals, render_camera, render_rays
+from lirm.engine.model.volume_renderer import VolumeRenderConfig, as_fitted, numerical_normals, render_camera, render_rays
 
 SIZE = 64
 CONFIG = VolumeRenderConfig()
@@ -136,3 +136,20 @@ def test_rendering_is_differentiable_in_the_planes(camera):
     assert out["opacity"].max() > 0.5
     (out["colour"].sum() + out["albedo"].sum() + out["normal_numerical"].sum()).backward()
     assert field.planes.grad is not None and field.planes.grad.abs().sum() > 0
+
+
+def test_a_refined_field_renders_at_the_beta_it_was_fitted_at(camera):
+    plain = SphereField(0.45)
+    assert as_fitted(CONFIG, plain) is CONFIG  # no fitted beta: the model's own
+    sharp = SphereField(0.45)
+    sharp.fitted_beta = 1.0 / 500.0
+    config = as_fitted(CONFIG, sharp)
+    assert config.beta == pytest.approx(1.0 / 500.0) and config.samples_per_ray == CONFIG.samples_per_ray
+    # Rendered at its own beta the coverage follows the true silhouette; at the softer 1/250 the
+    # density reaches further out and rim pixels outside the sphere gather more opacity.
+    _, hit, _ = _analytic_truth(sharp, camera)
+    outside = ~ndimage.binary_dilation(hit, iterations=1) & ndimage.binary_dilation(hit, iterations=3)
+    as_fitted_opacity = render_camera(sharp, camera, config)["opacity"]
+    softer_opacity = render_camera(sharp, camera, CONFIG)["opacity"]
+    assert as_fitted_opacity[outside].mean() < softer_opacity[outside].mean()
+    assert np.abs(as_fitted_opacity - hit).mean() < np.abs(softer_opacity - hit).mean()
