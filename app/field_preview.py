@@ -75,7 +75,8 @@ class FieldPreview:
             key, capture_dir, update, checkpoint, camera = wanted
             try:
                 field = self._decoded(capture_dir, update, checkpoint)
-                config = as_fitted(VolumeRenderConfig(samples_per_ray=self.samples_per_ray, numerical_normals=False), field)
+                config = as_fitted(VolumeRenderConfig(samples_per_ray=self.samples_per_ray, numerical_normals=False), field,
+                                    dense=False)  # a preview: the sharp density at its own samples
                 with torch.inference_mode():
                     grid = OccupancyGrid.build(field, field.radius, config.beta, 2.0 * field.radius / config.samples_per_ray,
                                                OccupancyConfig(resolution=64))

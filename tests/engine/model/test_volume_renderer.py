@@ -14,7 +14,8 @@ from lirm.engine.model.analytic_fields import BoxField, SphereField, box_ray_hit
 from lirm.engine.model.config import preset
 from lirm.engine.model.lirm import LIRM
 from lirm.engine.model.occupancy_grid import OccupancyConfig, OccupancyGrid
-from lirm.engine.model.volume_renderer import VolumeRenderConfig, as_fitted, numerical_normals, render_camera, render_rays
+from lirm.engine.model.volume_renderer import (FITTED_SPACING_IN_BETAS, VolumeRenderConfig, as_fitted, numerical_normals,
+                                               render_camera, render_rays)
 
 SIZE = 64
 CONFIG = VolumeRenderConfig()
@@ -144,7 +145,10 @@ def test_a_refined_field_renders_at_the_beta_it_was_fitted_at(camera):
     sharp = SphereField(0.45)
     sharp.fitted_beta = 1.0 / 500.0
     config = as_fitted(CONFIG, sharp)
-    assert config.beta == pytest.approx(1.0 / 500.0) and config.samples_per_ray == CONFIG.samples_per_ray
+    assert config.beta == pytest.approx(1.0 / 500.0)
+    # dense enough that the sharp density's step falls within a few samples; a preview keeps its own
+    assert 2.0 * sharp.radius / config.samples_per_ray <= FITTED_SPACING_IN_BETAS / 500.0 + 1e-9
+    assert as_fitted(CONFIG, sharp, dense=False).samples_per_ray == CONFIG.samples_per_ray
     # Rendered at its own beta the coverage follows the true silhouette; at the softer 1/250 the
     # density reaches further out and rim pixels outside the sphere gather more opacity.
     _, hit, _ = _analytic_truth(sharp, camera)
