@@ -64,8 +64,8 @@ class FieldPreview:
     def _work(self) -> None:
         import torch
 
-        from lirm.engine.model.occupancy_grid import OccupancyConfig, OccupancyGrid
-        from lirm.engine.model.volume_renderer import VolumeRenderConfig, as_fitted, render_camera
+        from lirm.engine.model.occupancy_grid import OccupancyConfig
+        from lirm.engine.model.volume_renderer import VolumeRenderConfig, fitted_render, render_camera
 
         while True:
             with self._lock:
@@ -75,11 +75,10 @@ class FieldPreview:
             key, capture_dir, update, checkpoint, camera = wanted
             try:
                 field = self._decoded(capture_dir, update, checkpoint)
-                config = as_fitted(VolumeRenderConfig(samples_per_ray=self.samples_per_ray, numerical_normals=False), field,
-                                    dense=False)  # a preview: the sharp density at its own samples
-                with torch.inference_mode():
-                    grid = OccupancyGrid.build(field, field.radius, config.beta, 2.0 * field.radius / config.samples_per_ray,
-                                               OccupancyConfig(resolution=64))
+                with torch.inference_mode():  # a preview: the sharp density at its own samples (dense=False)
+                    config, grid = fitted_render(field, VolumeRenderConfig(samples_per_ray=self.samples_per_ray,
+                                                                           numerical_normals=False),
+                                                 OccupancyConfig(resolution=64), dense=False)
                     out = render_camera(field, camera, config, grid)
                 self.image, self.image_key, self.error = np.clip(out["colour"], 0, 1), key, None
             except Exception as err:  # shown in the viewport, never raised into the window

@@ -21,8 +21,8 @@ from lirm.engine.export.marching_cubes import marching_cubes
 from lirm.engine.export.silhouette_offset import surface_level
 from lirm.engine.metrics import psnr, scaled_albedo_psnr, ssim
 from lirm.engine.model.field import device_of
-from lirm.engine.model.occupancy_grid import OccupancyConfig, OccupancyGrid
-from lirm.engine.model.volume_renderer import VolumeRenderConfig, as_fitted, render_camera
+from lirm.engine.model.occupancy_grid import OccupancyConfig
+from lirm.engine.model.volume_renderer import VolumeRenderConfig, fitted_render, render_camera
 from lirm.engine.synth.view_crops import crop_like_capture, resize_views
 from lirm.engine.train.perceptual import LPIPSLoss, lpips_available
 
@@ -133,9 +133,7 @@ def score_field(field_, obj: HeldoutObject, outputs: list[int], config: EvalConf
     once); with a `relighter` (relighting.Relighter), also the relighting test of its export (its
     textures fitted to `photos` under `lighting` when both are given: Relighter.score)."""
     device = device_of(field_)
-    render = as_fitted(config.render, field_)
-    step = 2.0 * field_.radius / render.samples_per_ray
-    grid = OccupancyGrid.build(field_, field_.radius, render.beta, step, config.occupancy)
+    render, grid = fitted_render(field_, config.render, config.occupancy)
     for i in outputs:
         out = render_camera(field_, obj.views.cameras[i], render, grid, device=device)
         truth = obj.views

@@ -24,7 +24,7 @@ import torch.nn.functional as F
 from lirm.engine.cameras import Camera
 
 from .field import volsdf_density
-from .occupancy_grid import OccupancyGrid
+from .occupancy_grid import OccupancyConfig, OccupancyGrid
 
 # Channels of the composited maps. "colour" is over the background; the others are premultiplied by opacity.
 CHANNELS = {"colour": 3, "albedo": 3, "roughness": 1, "metallic": 1, "normal": 3, "normal_numerical": 3}
@@ -59,6 +59,15 @@ def as_fitted(config: VolumeRenderConfig, field, dense: bool = True) -> VolumeRe
     if dense:
         samples = max(samples, math.ceil(2.0 * float(field.radius) / (FITTED_SPACING_IN_BETAS * float(beta))))
     return replace(config, beta=float(beta), samples_per_ray=samples)
+
+
+def fitted_render(field, config: VolumeRenderConfig, occupancy: OccupancyConfig,
+                  dense: bool = True) -> tuple[VolumeRenderConfig, OccupancyGrid]:
+    """What rendering `field` whole needs: `config` as fitted (as_fitted) and the occupancy grid
+    built at its beta and sample step."""
+    config = as_fitted(config, field, dense)
+    grid = OccupancyGrid.build(field, field.radius, config.beta, 2.0 * field.radius / config.samples_per_ray, occupancy)
+    return config, grid
 
 
 @dataclass

@@ -36,7 +36,7 @@ from lirm.engine.io.atomic_files import atomic_write_json
 from lirm.engine.metrics import psnr, ssim
 from lirm.engine.model.field_state import load_field, save_field_state
 from lirm.engine.model.pretrained import ModelSource
-from lirm.engine.model.volume_renderer import as_fitted, render_camera
+from lirm.engine.model.volume_renderer import fitted_render, render_camera
 from lirm.engine.refine import initial_fields
 from lirm.engine.refine.config import RefineConfig
 from lirm.engine.refine.refinable_field import RefinableField
@@ -232,10 +232,7 @@ def _save_fitted_lighting(lighting, folder: Path) -> None:
 @torch.no_grad()
 def _holdout_scores(field, held: list, render: ReconstructConfig) -> dict:
     """PSNR and SSIM of the refined field rendered from the held-out views' own crops, over white."""
-    config = as_fitted(replace(render.render, numerical_normals=False), field)
-    from lirm.engine.model.occupancy_grid import OccupancyGrid
-
-    grid = OccupancyGrid.build(field, field.radius, config.beta, 2.0 * field.radius / config.samples_per_ray, render.occupancy)
+    config, grid = fitted_render(field, replace(render.render, numerical_normals=False), render.occupancy)
     psnrs, ssims = [], []
     for view in held:
         out = render_camera(field, view.camera, config, grid)

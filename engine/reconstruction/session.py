@@ -28,10 +28,10 @@ from lirm.engine.capture.capture_lock import capture_lock
 from lirm.engine.capture.history_journal import HistoryBuild
 from lirm.engine.errors import LirmUserError
 from lirm.engine.io.images import to_uint8, write_png
-from lirm.engine.model.occupancy_grid import OccupancyConfig, OccupancyGrid
+from lirm.engine.model.occupancy_grid import OccupancyConfig
 from lirm.engine.model.pretrained import ModelSource
 from lirm.engine.model.state_file import save_state
-from lirm.engine.model.volume_renderer import VolumeRenderConfig, as_fitted, render_camera
+from lirm.engine.model.volume_renderer import VolumeRenderConfig, fitted_render, render_camera
 
 from .novel_views import novel_view_cameras
 from .view_batch import view_batch
@@ -236,10 +236,8 @@ class _Session:
 def write_pictures(field, cameras: list, config: ReconstructConfig, folder: Path, device) -> tuple[float, float]:
     """Volume-render `field` from `cameras` into folder/view_KK_<channel>.png; returns the occupancy
     grid's occupied fraction and the mean share of samples it skipped."""
-    render = as_fitted(config.render, field)
     with torch.inference_mode():
-        grid = OccupancyGrid.build(field, field.radius, render.beta, 2.0 * field.radius / render.samples_per_ray,
-                                   config.occupancy)
+        render, grid = fitted_render(field, config.render, config.occupancy)
         skipped = []
         for k, camera in enumerate(cameras):
             images = render_camera(field, camera, render, grid, device)
