@@ -83,6 +83,9 @@ class RefineConfig:
     head_lr: float = 2e-3
     final_lr_fraction: float = 0.1  # learning rates decay (cosine) to this share at the end of the budget
     edge_ray_fraction: float = 0.25  # share of each batch drawn from pixels along the mask's edge
+    # The rest of each batch drawn only from pixels whose ray meets the masks' dilated hull (the
+    # others render empty and teach nothing; refine_views.through_grid).
+    rays_through_hull: bool = False
     eikonal_points: int = 1024
     hull_resolution: int = 64  # the visual hull of the masks bounds where samples are taken
     hull_dilation_voxels: int = 2  # slack for masks and poses that are not exact (real captures)

@@ -124,6 +124,9 @@ def photo_loss(refinable: RefinableField, views: RefineViews, grid: OccupancyGri
     """The refinement's colour and mask loss of a starting field on a fixed batch of the views' rays at
     the final 1/beta: how far a start is from the photos (the same rays for every candidate)."""
     generator = torch.Generator().manual_seed(config.seed + 1)
+    if config.rays_through_hull and grid is not None and views.uniform_index is None:
+        # The rays the fit itself draws: those that miss the hull are alike for every start.
+        views = views.through_grid(grid, refinable.config.radius)
     index = views.sample_rays(rays, config.edge_ray_fraction, generator)
     field = refinable.field()
     render = render_ray_batch(field, views.origins[index], views.directions[index], grid, 1.0 / config.inv_beta[1],

@@ -133,6 +133,23 @@ def with_sdf_normals(field, render: RayBatchRender, origins: torch.Tensor, direc
     return replace(render, normal=normal)
 
 
+@torch.no_grad()
+def rays_meeting_grid(origins: torch.Tensor, directions: torch.Tensor, grid: OccupancyGrid, radius: float,
+                      steps: int = 192, chunk: int = 16384) -> torch.Tensor:
+    """(N,) bool: which rays pass through an occupied voxel of `grid` (checked at `steps` points
+    along each ray's chord of the bounding sphere, closer than a voxel). A ray that meets none is
+    rendered empty whatever the field holds: it has no gradient to give."""
+    device = grid.occupied.device
+    out = torch.zeros(origins.shape[0], dtype=torch.bool)
+    fractions = (torch.arange(steps, dtype=origins.dtype, device=device) + 0.5) / steps
+    for start in range(0, origins.shape[0], chunk):
+        o, d = origins[start:start + chunk].to(device), directions[start:start + chunk].to(device)
+        near, far, hit = sphere_interval(o, d, radius)
+        t = near[:, None] + fractions[None] * (far - near)[:, None]
+        out[start:start + chunk] = _occupied(o, d, t, hit, grid).any(dim=1).cpu()
+    return out
+
+
 def _occupied(origins, directions, t, hit, grid: OccupancyGrid | None) -> torch.Tensor:
     keep = hit[:, None].expand_as(t)
     if grid is None:

@@ -7,6 +7,7 @@ so that a share of every batch can be drawn there: the silhouette is where the s
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import cv2
@@ -29,6 +30,8 @@ class RefineViews:
     alphas: torch.Tensor  # (V*H*W,)
     edge_index: torch.Tensor  # flat indices of the pixels within 2 px of a mask edge
     pixel_angles: torch.Tensor  # (V*H*W,) the angle one pixel spans (1 / focal length): its footprint over distance
+    # Flat indices the uniform share of a batch is drawn from (None: every pixel): `through_grid`.
+    uniform_index: torch.Tensor | None = None
 
     @property
     def count(self) -> int:
@@ -80,10 +83,25 @@ class RefineViews:
         return RefineViews.build([self.names[i] for i in indices], [self.cameras[i] for i in indices],
                                  self.images[indices], self.masks[indices])
 
+    def through_grid(self, grid, radius: float) -> "RefineViews":
+        """These views with the uniform share of every batch drawn only from pixels whose ray meets
+        the occupancy grid (the masks' dilated hull): the others render empty whatever the field is,
+        and would spend the batch on nothing (most of a whole frame's pixels round a small object)."""
+        from .ray_rendering import rays_meeting_grid
+
+        meets = rays_meeting_grid(self.origins, self.directions, grid, radius)
+        if not bool(meets.any()):
+            return self
+        return dataclasses.replace(self, uniform_index=meets.nonzero(as_tuple=True)[0])
+
     def sample_rays(self, count: int, edge_fraction: float, generator: torch.Generator) -> torch.Tensor:
-        """Flat pixel indices of one batch: uniform over every pixel, plus `edge_fraction` from the edges."""
+        """Flat pixel indices of one batch: uniform over every pixel (or over `uniform_index`), plus
+        `edge_fraction` from the edges."""
         edges = int(round(count * edge_fraction)) if len(self.edge_index) else 0
-        uniform = torch.randint(0, self.pixels, (count - edges,), generator=generator)
+        if self.uniform_index is not None:
+            uniform = self.uniform_index[torch.randint(0, len(self.uniform_index), (count - edges,), generator=generator)]
+        else:
+            uniform = torch.randint(0, self.pixels, (count - edges,), generator=generator)
         if not edges:
             return uniform
         pick = torch.randint(0, len(self.edge_index), (edges,), generator=generator)

@@ -110,6 +110,8 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
     if lighting is not None:
         lighting.to(device)
     generator = torch.Generator().manual_seed(config.seed)
+    if config.rays_through_hull and grid is not None:
+        views = views.through_grid(grid, refinable.config.radius)
     budget = None if config.minutes is None else 60.0 * config.minutes
     resolutions = config.plane_resolutions
     anchor = _material_anchor(refinable.frozen_field(), device) if start_has_materials and config.anchor_materials else None

@@ -61,3 +61,11 @@ def test_the_auto_start_takes_whichever_field_agrees_better_with_the_photos(anal
     assert chosen == "hull-lirm" and start is near and losses["hull-lirm"] < losses["lirm"], losses
     start, chosen, losses = initial_fields.closer_start(near, far, views, None, refine)
     assert chosen == "lirm" and start is near and losses["lirm"] < losses["hull-lirm"], losses
+    # Judged on the rays the fit draws (those that meet the hull, `rays_through_hull`): the same choice,
+    # and both losses larger, since the rays every start gets right (the empty background) are left out.
+    grid = initial_fields.sampling_grid(hull, 1.0, dilation_voxels=1)
+    through = RefineConfig(coarse_samples=24, fine_samples=8, rays_through_hull=True)
+    _, chosen_all, losses_all = initial_fields.closer_start(near, far, views, grid, refine)
+    start, chosen, losses = initial_fields.closer_start(near, far, views, grid, through)
+    assert chosen == chosen_all == "lirm" and start is near
+    assert losses["hull-lirm"] > losses_all["hull-lirm"], (losses, losses_all)

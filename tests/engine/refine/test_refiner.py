@@ -63,6 +63,28 @@ def test_hull_grid_holds_the_object_and_samples_stay_in_it(sphere_views):
     assert 0 < out.samples < len(index) * 24  # empty space was skipped
 
 
+def test_batches_can_be_drawn_only_from_rays_that_meet_the_hull(sphere_views):
+    hull = initial_fields.masks_hull(sphere_views, 32, 1.0)
+    grid = initial_fields.sampling_grid(hull, 1.0, dilation_voxels=1)
+    through = sphere_views.through_grid(grid, 1.0)
+    chosen = through.uniform_index
+    assert chosen is not None and 0 < len(chosen) < sphere_views.pixels
+    # Every object pixel's ray meets the hull; the chosen ones are exactly those that render non-empty
+    # (a ray missing the grid has no sample at all, whatever the field).
+    assert bool(torch.isin((sphere_views.alphas > 0.5).nonzero(as_tuple=True)[0], chosen).all())
+    field = _tiny_field().field()
+    out = render_ray_batch(field, sphere_views.origins, sphere_views.directions, grid, 0.05, 48, 8)
+    missed = torch.ones(sphere_views.pixels, dtype=torch.bool)
+    missed[chosen] = False
+    assert float(out.opacity[missed].abs().max()) == 0.0 and float(out.opacity[chosen].max()) > 0.0
+    batch = through.sample_rays(400, 0.25, torch.Generator().manual_seed(0))
+    uniform = batch[:300]  # the edge share comes after the uniform one
+    assert bool(torch.isin(uniform, chosen).all())
+    assert sphere_views.uniform_index is None  # the original views are unchanged
+    result = refine_field(_tiny_field(), sphere_views, replace(SMALL, iterations=6, rays_through_hull=True), grid)
+    assert result.steps == 6 and all(np.isfinite(h["loss"]) for h in result.history)
+
+
 def test_appearance_heads_read_only_the_samples_with_weight_and_the_render_barely_moves(sphere_views):
     hull = initial_fields.masks_hull(sphere_views, 32, 1.0)
     grid = initial_fields.sampling_grid(hull, 1.0, 1)
