@@ -36,8 +36,8 @@ def refine_inputs(obj: HeldoutObject, indices: list[int]) -> RefineViews:
     (as a photo's is, and as the texture fit's footprint models it); cropped round the object and
     resized back to that size, as the network's inputs are, they were upsampled 1.25-1.85 x by
     interpolation: blurred, each view by its own amount at its own offsets, and the fit's detail with
-    them (README, "The refinement at the inputs' own pixels": +1.4 dB of relighting). A capture's
-    prepared views are taken as they are."""
+    them (README, "The refinement at the inputs' own pixels": +1.4 dB of relighting on the synthetic
+    set, a wash on the glTF set). A capture's prepared views are taken as they are."""
     return RefineViews.from_object_views(obj.views.select(indices), [f"view_{i:02d}" for i in indices])
 
 
