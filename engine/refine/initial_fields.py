@@ -124,9 +124,6 @@ def photo_loss(refinable: RefinableField, views: RefineViews, grid: OccupancyGri
     """The refinement's colour and mask loss of a starting field on a fixed batch of the views' rays at
     the final 1/beta: how far a start is from the photos (the same rays for every candidate)."""
     generator = torch.Generator().manual_seed(config.seed + 1)
-    if config.rays_through_hull and grid is not None and views.uniform_index is None:
-        # The rays the fit itself draws: those that miss the hull are alike for every start.
-        views = views.through_grid(grid, refinable.config.radius)
     index = views.sample_rays(rays, config.edge_ray_fraction, generator)
     field = refinable.field()
     render = render_ray_batch(field, views.origins[index], views.directions[index], grid, 1.0 / config.inv_beta[1],
@@ -148,6 +145,9 @@ def closer_start(from_lirm: RefinableField, from_hull: RefinableField, views: Re
     further from them than the masks' hull does, so whichever of the two agrees better with the views
     (`photo_loss` on the same rays; LIRM on a tie). Returns the field, "lirm" or "hull-lirm", and both
     losses."""
+    if config.rays_through_hull and grid is not None and views.uniform_index is None:
+        # The rays the fit itself draws (found once for both): those that miss the hull are alike for every start.
+        views = views.through_grid(grid, from_lirm.config.radius)
     losses = {name: photo_loss(candidate, views, grid, config) for name, candidate in (("lirm", from_lirm), ("hull-lirm", from_hull))}
     if losses["lirm"] <= losses["hull-lirm"]:
         return from_lirm, "lirm", losses
