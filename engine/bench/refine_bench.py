@@ -180,12 +180,10 @@ def run_warm_start_bench(model, objects: list[HeldoutObject], eval_config: EvalC
         sets = obj.protocol.input_sets
         early = refine_inputs(obj, [i for s in sets[:2] for i in s])
         views = refine_inputs(obj, [i for s in sets[:4] for i in s])
-        hull = initial_fields.masks_hull(early, base.hull_resolution, radius)
         first = refine_field(initial_fields.from_lirm(lirm_field(model, obj, 2), base.plane_resolutions[0]), early,
-                             replace(base, minutes=minutes), initial_fields.sampling_grid(hull, radius, base.hull_dilation_voxels),
+                             replace(base, minutes=minutes), initial_fields.views_sampling_grid(early, base, radius),
                              start_has_materials=True)
-        grid = initial_fields.sampling_grid(initial_fields.masks_hull(views, base.hull_resolution, radius), radius,
-                                            base.hull_dilation_voxels)
+        grid = initial_fields.views_sampling_grid(views, base, radius)
         cold = refine_field(initial_fields.from_lirm(lirm_field(model, obj, 4), base.plane_resolutions[0]), views,
                             replace(base, minutes=minutes), grid, start_has_materials=True)
         row = {"object": obj.name, "cold": {"minutes": minutes, **_scored(cold.field.frozen_field(), obj, eval_config)}, "warm": []}

@@ -117,7 +117,7 @@ def project_points(camera: Camera, points: np.ndarray) -> tuple[np.ndarray, np.n
     return xy, z, valid
 
 
-def _distance_to(target: np.ndarray) -> np.ndarray:
+def distance_to(target: np.ndarray) -> np.ndarray:
     """Per pixel, the distance in pixels to the nearest True pixel of `target` (0 on it)."""
     if target.all():
         return np.zeros(target.shape, np.float32)
@@ -129,7 +129,7 @@ def _distance_to(target: np.ndarray) -> np.ndarray:
 def _signed_distances(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(distance to the nearest object pixel, distance to the nearest background pixel)."""
     obj = np.asarray(mask) > 127
-    return _distance_to(obj), _distance_to(~obj)
+    return distance_to(obj), distance_to(~obj)
 
 
 def _carve(

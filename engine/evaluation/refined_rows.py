@@ -68,17 +68,19 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
     views = refine_inputs(obj, [i for s in sets for i in s])
     start = time.perf_counter()
     hull = initial_fields.masks_hull(views, refine.hull_resolution, model.config.radius)
-    grid = initial_fields.sampling_grid(hull, model.config.radius, refine.hull_dilation_voxels, refine.device)
+    grid = initial_fields.views_sampling_grid(views, refine, model.config.radius)
     resolution = refine.plane_resolutions[0]
     chosen = init
     if init == "lirm":
         refinable = initial_fields.from_lirm(lirm_field(model, obj, updates), resolution)
     elif init == "auto":  # as `lirm refine` starts a capture with no refinement yet
         prediction = lirm_field(model, obj, updates)
-        from_hull = initial_fields.from_hull(hull, model.config, model.heads, resolution, refine.hull_init_steps, refine.seed,
-                                             materials=prediction)
+        from_hull, from_footprint_hull = (
+            initial_fields.from_hull(shape, model.config, model.heads, resolution, refine.hull_init_steps, refine.seed,
+                                     materials=prediction)
+            for shape in (hull, initial_fields.masks_hull(views, refine.hull_resolution, model.config.radius, footprint=True)))
         refinable, chosen, _ = initial_fields.closer_start(initial_fields.from_lirm(prediction, resolution), from_hull,
-                                                           views, grid, refine)
+                                                           views, grid, refine, from_footprint_hull)
     elif init in ("hull", "hull-lirm"):
         materials = lirm_field(model, obj, updates) if init == "hull-lirm" else None
         refinable = initial_fields.from_hull(hull, model.config, model.heads, resolution, refine.hull_init_steps, refine.seed,
@@ -91,7 +93,7 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
     if refine.inverse_rendering:
         lighting = (oracle_lighting(obj, true_lighting) if true_lighting is not None
                     else input_lighting(obj, [i for s in sets for i in s], refine))
-    result = refine_field(refinable, views, refine, grid, lighting=lighting, start_has_materials=chosen in ("lirm", "hull-lirm"))
+    result = refine_field(refinable, views, refine, grid, lighting=lighting, start_has_materials=chosen in ("lirm", "hull-lirm", "hull-lirm-footprint"))
     return RefinedObject(result.field.frozen_field(), time.perf_counter() - start, result.steps, views, result.lighting, chosen)
 
 

@@ -9,8 +9,9 @@ record in summary.json. Export, guidance, evaluation and the app read it exactly
 Where it starts (`init`):
 - "auto" (default): the last refined step if the history has one (a warm start: after new photos
   and a new update, refining goes on from the earlier refinement with all the views), else the
-  latest LIRM update or, when the hull agrees better with the photos, the hull's shape with that
-  update's materials ("hull-lirm"), else the carved hull;
+  latest LIRM update or, when a hull agrees better with the photos, that hull's shape with the
+  update's materials ("hull-lirm": the hull of the voxels' centres, or of their footprints where
+  that one is closer, as for parts thinner than a voxel), else the carved hull;
 - "lirm": the latest LIRM update's decoded field; "hull": the visual hull of the masks; "hull-lirm": the
   hull's shape with the latest update's roughness and metallic; "scratch".
 
@@ -92,8 +93,8 @@ def _starting_field(capture: Capture, init: str, source: ModelSource, views: Ref
         field = load_field(capture.root / entry["state"], model)
         return RefinableField.from_field(field), f"refinement {number} (warm start)"
 
-    def hull_start(materials=None):
-        return initial_fields.from_hull(hull, model.config, model.heads, resolution, config.hull_init_steps, config.seed,
+    def hull_start(materials=None, shape=None):
+        return initial_fields.from_hull(hull if shape is None else shape, model.config, model.heads, resolution, config.hull_init_steps, config.seed,
                                         cancel, materials=materials)
 
     if init in ("auto", "lirm", "hull-lirm"):
@@ -108,12 +109,15 @@ def _starting_field(capture: Capture, init: str, source: ModelSource, views: Ref
                 return from_lirm, named
             # Whichever of LIRM and the hull agrees better with the views; the hull takes the prior's
             # roughness and metallic (it has none of its own; README: what that was worth).
-            grid = initial_fields.sampling_grid(hull, model.config.radius, config.hull_dilation_voxels)
-            start, chosen, losses = initial_fields.closer_start(from_lirm, hull_start(field), views, grid, config)
+            grid = initial_fields.views_sampling_grid(views, config, model.config.radius)
+            footprint_hull = initial_fields.masks_hull(views, config.hull_resolution, model.config.radius, footprint=True)
+            start, chosen, losses = initial_fields.closer_start(from_lirm, hull_start(field), views, grid, config,
+                                                                hull_start(field, footprint_hull))
             if chosen == "lirm":
                 return start, named
-            notes.append(f"the carved hull agrees better with the photos than {named} "
-                         f"(loss {losses['hull-lirm']:.4f} against {losses['lirm']:.4f}): starting from the hull's shape "
+            which = "carved hull" if chosen == "hull-lirm" else "hull carved by the voxels' footprints (thin parts kept)"
+            notes.append(f"the {which} agrees better with the photos than {named} "
+                         f"(loss {losses[chosen]:.4f} against {losses['lirm']:.4f}): starting from the hull's shape "
                          f"with the update's materials")
             return start, f"carved hull with {named}'s materials"
         if init != "auto":
@@ -151,7 +155,7 @@ def _refine_locked(capture_dir, source: ModelSource, config: RefineConfig, init:
     notes: list[str] = []
     radius = source.model.config.radius
     hull = initial_fields.masks_hull(views, config.hull_resolution, radius)
-    grid = initial_fields.sampling_grid(hull, radius, config.hull_dilation_voxels, config.device)
+    grid = initial_fields.views_sampling_grid(views, config, radius)
     if grid is None:
         notes.append("the masks' visual hull is empty (masks or poses disagree): sampling the whole bounding sphere")
     refinable, started_from = _starting_field(capture, init, source, views, hull, config, notes, cancel)

@@ -24,9 +24,10 @@ INITS = ("lirm", "hull", "hull-lirm", "scratch")
 # hull-lirm agrees better with the photos (`closer_start`).
 
 
-def masks_hull(views: RefineViews, resolution: int, radius: float) -> CarvedHullState:
-    """The visual hull of the views' masks, coloured from their pixels (evaluation/carved_hull.py)."""
-    hull = CarvedHull(image_size=views.images.shape[1], resolution=resolution, radius=radius)
+def masks_hull(views: RefineViews, resolution: int, radius: float, footprint: bool = False) -> CarvedHullState:
+    """The visual hull of the views' masks, coloured from their pixels (evaluation/carved_hull.py).
+    `footprint`: each voxel kept when any part of it may touch every mask, not only its centre."""
+    hull = CarvedHull(image_size=views.images.shape[1], resolution=resolution, radius=radius, footprint=footprint)
     return hull.update_known(hull.initial_state(1), views.cameras, list(views.images), [m > 0.5 for m in views.masks])
 
 
@@ -38,6 +39,16 @@ def sampling_grid(hull: CarvedHullState, radius: float, dilation_voxels: int, de
         return None
     occupied = ndimage.binary_dilation(hull.occupancy, iterations=dilation_voxels) if dilation_voxels else hull.occupancy
     return OccupancyGrid(torch.from_numpy(np.ascontiguousarray(occupied)).to(device), radius)
+
+
+def views_sampling_grid(views: RefineViews, config: RefineConfig, radius: float) -> OccupancyGrid | None:
+    """Where the refinement of `views` samples: their masks' hull carved by each voxel's footprint
+    (parts thinner than a voxel stay: a centre test lost a panel of zero thickness, and no sample
+    could reach it), dilated by `config.hull_dilation_voxels`. The start from the hull keeps the
+    centre test: a voxel fatter, it agreed less with the photos (README, "The refinement's hull,
+    for thin parts")."""
+    return sampling_grid(masks_hull(views, config.hull_resolution, radius, footprint=True), radius,
+                         config.hull_dilation_voxels, config.device)
 
 
 def from_lirm(field: Field, resolution: int) -> RefinableField:
@@ -140,15 +151,20 @@ def photo_loss(refinable: RefinableField, views: RefineViews, grid: OccupancyGri
 
 
 def closer_start(from_lirm: RefinableField, from_hull: RefinableField, views: RefineViews, grid: OccupancyGrid | None,
-                 config: RefineConfig) -> tuple[RefinableField, str, dict[str, float]]:
+                 config: RefineConfig, from_footprint_hull: RefinableField | None = None) -> tuple[RefinableField, str, dict[str, float]]:
     """The start of `lirm refine --init auto`: a prior that does not yet follow its photos can start
-    further from them than the masks' hull does, so whichever of the two agrees better with the views
-    (`photo_loss` on the same rays; LIRM on a tie). Returns the field, "lirm" or "hull-lirm", and both
-    losses."""
+    further from them than the masks' hull does, so whichever of the candidates agrees best with the
+    views (`photo_loss` on the same rays; LIRM on a tie, then the centres' hull). Returns the field,
+    "lirm", "hull-lirm" or "hull-lirm-footprint", and every candidate's loss. `from_footprint_hull`:
+    the hull carved by each voxel's footprint (`masks_hull(footprint=True)`) with the prior's
+    materials: a voxel fatter where the centres' hull is right, whole where it lost parts thinner
+    than a voxel (README, "The refinement's hull, for thin parts")."""
     if config.rays_through_hull and grid is not None and views.uniform_index is None:
         # The rays the fit itself draws (found once for both): those that miss the hull are alike for every start.
         views = views.through_grid(grid, from_lirm.config.radius)
-    losses = {name: photo_loss(candidate, views, grid, config) for name, candidate in (("lirm", from_lirm), ("hull-lirm", from_hull))}
-    if losses["lirm"] <= losses["hull-lirm"]:
-        return from_lirm, "lirm", losses
-    return from_hull, "hull-lirm", losses
+    candidates = {"lirm": from_lirm, "hull-lirm": from_hull}
+    if from_footprint_hull is not None:
+        candidates["hull-lirm-footprint"] = from_footprint_hull
+    losses = {name: photo_loss(candidate, views, grid, config) for name, candidate in candidates.items()}
+    best = min(losses, key=losses.get)  # the first of equals: the order above
+    return candidates[best], best, losses

@@ -110,3 +110,47 @@ def test_scored_on_heldout_objects_it_improves_with_every_update(renderer):
     rows = evaluate_heldout(CarvedHull(image_size=48), objects, config).rows
     assert rows[2].chamfer < rows[0].chamfer and rows[2].psnr > rows[0].psnr
     assert rows[2].chamfer < 0.08  # the silhouettes of 12 views pin the shape down
+
+
+def _panel_views(angles: list[tuple[float, float]], half: float, offset: float, size: int = 64):
+    """Cameras and exact masks of a square panel of zero thickness in the plane y = `offset`,
+    |x|, |z| <= `half` (a card, a leaf, the glTF set's NormalTangentTest)."""
+    cameras, masks = [], []
+    for azimuth, elevation in angles:
+        camera = orbit_camera(azimuth, elevation, 2.6, size, size, 50.0)
+        plucker = camera.plucker().astype(np.float64)
+        d, o = plucker[..., :3], camera.center
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (offset - o[1]) / d[..., 1]
+        x, z = o[0] + t * d[..., 0], o[2] + t * d[..., 2]
+        mask = (t > 0) & (np.abs(x) <= half) & (np.abs(z) <= half)
+        if mask.sum() >= 20:  # a view edge-on sees nothing of it
+            cameras.append(camera)
+            masks.append(mask)
+    return cameras, masks
+
+
+def test_the_footprint_carve_keeps_parts_thinner_than_a_voxel():
+    """A centre test carves away a panel thinner than a voxel (its voxels' centres lie off the plane
+    and project beside its silhouette in oblique views); the footprint carve, which the refinement's
+    start and sampling bounds use, keeps the voxels the panel passes through and stays a slab."""
+    angles = [(a, e) for e in (20.0, 40.0) for a in range(10, 360, 45)]
+    voxel = 2.0 / 32
+    cameras, masks = _panel_views(angles, half=0.4, offset=0.02 * voxel)
+    assert len(cameras) >= 12
+    images = [np.zeros(m.shape + (3,)) for m in masks]
+    grid = np.linspace(-0.4, 0.4, 41)
+    points = np.stack(np.meshgrid(grid, [0.02 * voxel], grid, indexing="ij"), -1).reshape(-1, 3)
+    cells = np.clip(((points + 1.0) / voxel).astype(int), 0, 31)
+
+    def kept(footprint: bool) -> tuple[float, int]:
+        hull = CarvedHull(image_size=64, resolution=32, footprint=footprint)
+        occupancy = hull.update_known(hull.initial_state(1), cameras, images, masks).occupancy
+        thickness = int(occupancy.any(axis=(0, 2)).sum())  # voxel layers along y holding anything
+        return float(occupancy[cells[:, 0], cells[:, 1], cells[:, 2]].mean()), thickness
+
+    centre_share, _ = kept(False)
+    footprint_share, thickness = kept(True)
+    assert centre_share < 0.5
+    assert footprint_share > 0.99  # a corner cell of a grazing view may go: the masks are read at pixel centres
+    assert thickness <= 8  # a slab (the ball it was carved from spans 32 layers)

@@ -69,3 +69,22 @@ def test_the_auto_start_takes_whichever_field_agrees_better_with_the_photos(anal
     start, chosen, losses = initial_fields.closer_start(near, far, views, grid, through)
     assert chosen == chosen_all == "lirm" and start is near
     assert losses["hull-lirm"] > losses_all["hull-lirm"], (losses, losses_all)
+
+
+def test_the_footprint_hull_is_a_third_candidate_and_wins_when_it_is_closest(analytic_views):
+    """With `from_footprint_hull`, the closest of three starts is taken, whichever it is: the field
+    regressed onto the hull beats two untrained ones from either hull slot."""
+    views = analytic_views(SphereField(sphere_radius=0.5), orbit_cameras(6, 20.0, 2.6, 32, 32, 50.0))
+    footprint = initial_fields.masks_hull(views, 32, 1.0, footprint=True)
+    centres = initial_fields.masks_hull(views, 32, 1.0)
+    # The footprint carve keeps every voxel the centre test keeps, and more.
+    assert (footprint.occupancy | centres.occupancy).sum() == footprint.occupancy.sum() > centres.occupancy.sum()
+    config = preset("tiny")
+    near = initial_fields.from_hull(footprint, config, None, 16, steps=120, seed=1)
+    far, farther = initial_fields.scratch(config, 16, seed=3), initial_fields.scratch(config, 16, seed=4)
+    refine = RefineConfig(coarse_samples=24, fine_samples=8)
+    start, chosen, losses = initial_fields.closer_start(far, farther, views, None, refine, near)
+    assert chosen == "hull-lirm-footprint" and start is near and set(losses) == {"lirm", "hull-lirm", "hull-lirm-footprint"}
+    assert losses["hull-lirm-footprint"] < min(losses["lirm"], losses["hull-lirm"]), losses
+    start, chosen, _ = initial_fields.closer_start(far, near, views, None, refine, farther)
+    assert chosen == "hull-lirm" and start is near
