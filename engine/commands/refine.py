@@ -36,9 +36,9 @@ def add_parser(subparsers) -> None:
                         help="inverse-render the materials: shade them under the capture's lighting (fitted with them, "
                              "from the estimate `lirm capture` made) and fit that to the photos, so that albedo holds no "
                              "baked shading (experimental: see the README's relighting figures)")
-    parser.add_argument("--light-lobes", type=int, default=0, metavar="K",
+    parser.add_argument("--light-lobes", type=int, default=None, metavar="K",
                         help="with --materials: fit K compact lights (spherical Gaussians) beside the lighting panorama, for a "
-                             "sun or lamp the photos did not see (default 0; README: what one was worth)")
+                             "sun or lamp the photos did not see (default 1; 0: the panorama alone; README: what one was worth)")
     parser.set_defaults(run=run)
 
 
@@ -59,9 +59,9 @@ def run(args: argparse.Namespace) -> int:
         raise LirmUsageError(f"--live-every must be positive, got {args.live_every}")
     if args.minutes is not None and not args.minutes > 0:
         raise LirmUsageError(f"--minutes must be positive, got {args.minutes}")
-    if args.light_lobes and not args.materials:
+    if args.light_lobes is not None and not args.materials:
         raise LirmUsageError("--light-lobes shapes the lighting fitted with the materials; add --materials")
-    if not 0 <= args.light_lobes <= 8:
+    if args.light_lobes is not None and not 0 <= args.light_lobes <= 8:
         raise LirmUsageError(f"--light-lobes must lie in 0..8, got {args.light_lobes}")
     require_capture(args.capture)
     check_output(args.capture, "the capture folder", folder=True)
@@ -71,7 +71,9 @@ def run(args: argparse.Namespace) -> int:
     device = ("cuda" if torch.cuda.is_available() else "cpu") if args.device == "auto" else args.device
     if device.startswith("cuda") and not torch.cuda.is_available():
         raise LirmUserError("--device cuda: no CUDA device is available here; use --device cpu")
-    overrides = {"device": device, "inverse_rendering": bool(args.materials), "light_lobes": args.light_lobes}
+    overrides = {"device": device, "inverse_rendering": bool(args.materials)}
+    if args.light_lobes is not None:
+        overrides["light_lobes"] = args.light_lobes
     if args.minutes is not None:
         overrides["minutes"] = args.minutes
     if args.iterations is not None:

@@ -68,18 +68,21 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
     views = refine_inputs(obj, [i for s in sets for i in s])
     start = time.perf_counter()
     hull = initial_fields.masks_hull(views, refine.hull_resolution, model.config.radius)
-    grid = initial_fields.views_sampling_grid(views, refine, model.config.radius)
+    footprint_hull = initial_fields.masks_hull(views, refine.hull_resolution, model.config.radius, footprint=True)
+    grid = initial_fields.views_sampling_grid(views, refine, model.config.radius, footprint_hull)
     resolution = refine.plane_resolutions[0]
     chosen = init
     if init == "lirm":
         refinable = initial_fields.from_lirm(lirm_field(model, obj, updates), resolution)
     elif init == "auto":  # as `lirm refine` starts a capture with no refinement yet
         prediction = lirm_field(model, obj, updates)
-        from_hull, from_footprint_hull = (
-            initial_fields.from_hull(shape, model.config, model.heads, resolution, refine.hull_init_steps, refine.seed,
-                                     materials=prediction)
-            for shape in (hull, initial_fields.masks_hull(views, refine.hull_resolution, model.config.radius, footprint=True)))
-        refinable, chosen, _ = initial_fields.closer_start(initial_fields.from_lirm(prediction, resolution), from_hull,
+        def from_hull(shape):
+            return initial_fields.from_hull(shape, model.config, model.heads, resolution, refine.hull_init_steps,
+                                            refine.seed, materials=prediction)
+        # The footprint hull a candidate only where it kept parts the centres' hull lost (as `lirm refine`).
+        from_footprint_hull = (from_hull(footprint_hull) if initial_fields.footprint_keeps_lost_parts(hull, footprint_hull)
+                               else None)
+        refinable, chosen, _ = initial_fields.closer_start(initial_fields.from_lirm(prediction, resolution), from_hull(hull),
                                                            views, grid, refine, from_footprint_hull)
     elif init in ("hull", "hull-lirm"):
         materials = lirm_field(model, obj, updates) if init == "hull-lirm" else None

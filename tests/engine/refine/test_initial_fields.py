@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
+import numpy as np
 import pytest
 import torch
 
@@ -88,3 +91,53 @@ def test_the_footprint_hull_is_a_third_candidate_and_wins_when_it_is_closest(ana
     assert losses["hull-lirm-footprint"] < min(losses["lirm"], losses["hull-lirm"]), losses
     start, chosen, _ = initial_fields.closer_start(far, near, views, None, refine, farther)
     assert chosen == "hull-lirm" and start is near
+
+
+def _carved_masks(hits, resolution: int = 32, size: int = 64):
+    """The centres' and the footprint hulls of 16 views' exact masks of a shape: `hits(origin, directions)`
+    says which rays (N, 3) meet it."""
+    from lirm.engine.cameras import orbit_camera
+    from lirm.engine.evaluation.carved_hull import CarvedHull
+
+    cameras, masks = [], []
+    for elevation in (20.0, 40.0):
+        for azimuth in range(10, 360, 45):
+            camera = orbit_camera(azimuth, elevation, 2.6, size, size, 50.0)
+            directions = camera.plucker().astype(np.float64).reshape(-1, 3 + 3)[:, :3]
+            masks.append(hits(camera.center, directions).reshape(size, size))
+            cameras.append(camera)
+    images = [np.zeros(m.shape + (3,)) for m in masks]
+    hulls = []
+    for footprint in (False, True):
+        hull = CarvedHull(image_size=size, resolution=resolution, footprint=footprint)
+        hulls.append(hull.update_known(hull.initial_state(1), cameras, images, masks))
+    return hulls
+
+
+def _ball_hits(origin, directions, radius: float = 0.5):
+    along = directions @ origin  # rays of unit direction: the nearest approach to the centre
+    return np.dot(origin, origin) - along ** 2 < radius ** 2
+
+
+def _panel_hits(origin, directions, height: float, half: float = 0.4):
+    t = (height - origin[1]) / directions[:, 1]  # a square of no thickness in the plane y = height
+    x, z = origin[0] + t * directions[:, 0], origin[2] + t * directions[:, 2]
+    return (t > 0) & (np.abs(x) <= half) & (np.abs(z) <= half)
+
+
+def test_the_footprint_hull_is_a_candidate_only_where_it_kept_lost_parts():
+    """`footprint_keeps_lost_parts` decides whether the footprint hull is worth a start of its own: not
+    for a ball (there it is the centres' hull a voxel fatter), yes for a panel thinner than a voxel
+    (the centre test carved most of it away)."""
+    voxel = 2.0 / 32
+    ball = _carved_masks(_ball_hits)
+    panel = _carved_masks(lambda origin, directions: _panel_hits(origin, directions, 0.02 * voxel))
+    for centres, footprint in (ball, panel):
+        assert footprint.occupancy.sum() > centres.occupancy.sum()
+    assert not initial_fields.footprint_keeps_lost_parts(*ball)
+    assert initial_fields.footprint_keeps_lost_parts(*panel)
+    # A footprint hull carved away entirely has nothing to add; where the centre test kept nothing at
+    # all, whatever the footprint kept was lost by it.
+    centres, footprint = panel
+    assert not initial_fields.footprint_keeps_lost_parts(centres, replace(footprint, occupancy=np.zeros_like(footprint.occupancy)))
+    assert initial_fields.footprint_keeps_lost_parts(replace(centres, occupancy=None), footprint)
