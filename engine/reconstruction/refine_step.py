@@ -111,7 +111,7 @@ def _starting_field(capture: Capture, init: str, source: ModelSource, views: Ref
             # Whichever of LIRM and the hull agrees better with the views; the hull takes the prior's
             # roughness and metallic (it has none of its own; README: what that was worth).
             # The footprint hull (the sampling bounds) is a third candidate only where it kept parts the
-            # centres' hull lost: elsewhere it is that hull a voxel fatter, and its regression costs 8-9 s.
+            # centres' hull lost: elsewhere it is that hull a voxel fatter, and its regression costs 5-9 s.
             third = (hull_start(field, footprint_hull) if initial_fields.footprint_keeps_lost_parts(hull, footprint_hull)
                      else None)
             start, chosen, losses = initial_fields.closer_start(from_lirm, hull_start(field), views, grid, config, third)

@@ -58,7 +58,7 @@ def footprint_keeps_lost_parts(centres: CarvedHullState, footprint: CarvedHullSt
     """Whether the footprint hull holds parts the centres' hull lost (a panel thinner than a voxel),
     not only the voxel of fattening it has everywhere: more than `fraction` of its voxels lie beyond
     `margin_voxels` of the centres' hull. Only then is it worth a start candidate of its own (a hull
-    regression, 8-9 s). On 2026-12-03's held-out objects (16 views, 64^3) that share was 0-2.8% for
+    regression, 5-9 s). On 2026-12-02's held-out objects (16 views, 64^3) that share was 0-2.8% for
     the four synthetic and six of the seven glTF models, and 55% for the panel of tiles (README)."""
     if footprint.occupancy is None or not footprint.occupancy.any():
         return False
