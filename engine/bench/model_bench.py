@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import platform
 import statistics
 import time
 from dataclasses import asdict, dataclass, field, replace
@@ -27,6 +26,7 @@ import torch.nn.functional as F
 
 from lirm.engine.errors import LirmUserError
 
+from .machine_facts import device_name
 from .peak_memory import PeakMemory, available_bytes, release_memory
 
 # Dense bf16 tensor-core peaks (no sparsity) from NVIDIA's data sheets, matched in order as substrings of
@@ -153,7 +153,7 @@ def run_model_bench(config: ModelBenchConfig, progress=None) -> ModelBenchResult
         torch.manual_seed(config.seed)
         model = LIRM(cfg).eval().to(device)
     result = ModelBenchResult(
-        preset=cfg.name, device=str(device), device_name=_device_name(device),
+        preset=cfg.name, device=str(device), device_name=device_name(device),
         dtype="bfloat16 (autocast)" if cuda else "float32", torch_version=torch.__version__,
         threads=torch.get_num_threads(), image_size=cfg.image_size, views_per_update=config.views_per_update,
         memory_method=meter.method, memory_note=meter.note,
@@ -297,19 +297,6 @@ def _resolve_device(name: str) -> torch.device:
     if name != "cpu":
         raise LirmUserError(f"unknown device {name!r}; choose cpu, cuda or auto")
     return torch.device("cpu")
-
-
-def _device_name(device: torch.device) -> str:
-    if device.type == "cuda":
-        return torch.cuda.get_device_name(device)
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def gpu_peak_flops(device_name: str) -> float | None:

@@ -25,6 +25,7 @@ from lirm.engine.refine.refiner import refine_field
 from lirm.engine.errors import LirmUserError
 from lirm.engine.refine.config import LossWeights, RefineConfig
 
+from .machine_facts import describe, machine_facts
 from .peak_memory import PeakMemory, release_memory
 
 
@@ -75,7 +76,9 @@ def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfi
     scored too, under plain_ keys); `swap_study`: also the relighting with parts swapped for the truth's
     (relight_swaps.py; the objects must carry the truth's G-buffers), under swap_ keys. A budget of None
     runs base.iterations steps with no wall-clock budget: the schedule then follows the steps alone, and
-    the fit is the same on any machine (with a wall-clock budget it follows the time, even at step 0)."""
+    the fit is the same twice on one machine (with a wall-clock budget it follows the time, even at step
+    0); across machines it differs in the last bits and then more (machine_facts.py), so the result
+    records the machine."""
     meter = PeakMemory("cpu" if base.device == "cpu" else "cuda")
     budgets = []
     relighter = None
@@ -107,6 +110,7 @@ def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfi
         if relighter is not None:
             relighter.release()
     return {"init": init, "lighting": "truth" if true_lighting else "estimate", "texture_fit": texture_fit, "settings": base.to_dict(),
+            "machine": machine_facts(base.device),
             "memory_method": meter.method, "budgets": budgets}
 
 
@@ -147,6 +151,8 @@ def refine_bench_table(result: dict, set_name: str) -> str:
                   "| budget | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ |", "|---|---|---|---|"]
         for b in result["budgets"]:
             lines.append(f"| {b['budget']} | " + " | ".join(f"{b[key]:.2f}" for key in EXPORTED_MATERIAL_KEYS) + " |")
+    if "machine" in result:  # fits of equal steps pair exactly only on one machine (machine_facts.py)
+        lines += ["", f"Machine: {describe(result['machine'])}."]
     return "\n".join(lines) + "\n"
 
 

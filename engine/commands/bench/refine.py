@@ -21,8 +21,8 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--minutes", type=float, nargs="+", default=[0.5, 1.0, 3.0, 10.0], help="budgets (default 0.5 1 3 10)")
     parser.add_argument("--steps", type=int, metavar="N",
                         help="instead of --minutes: each fit runs exactly N steps, its schedule following the steps alone, "
-                             "so that the same inputs give the same fit on any machine and two settings compare at "
-                             "equal steps whatever the machine's pace")
+                             "so that the same inputs give the same fit twice on one machine (other CPUs round differently; "
+                             "the output names the machine) and two settings compare at equal steps whatever its pace")
     parser.add_argument("--init", choices=("lirm", "hull", "hull-lirm", "scratch", "auto"), default="lirm",
                         help="start from (default lirm; hull-lirm: the hull's shape with LIRM's materials; auto: whichever "
                              "of the two agrees better with the inputs, as `lirm refine` starts a capture)")

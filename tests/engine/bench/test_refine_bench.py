@@ -72,8 +72,13 @@ def test_bench_refine_at_a_fixed_step_count_gives_the_same_fit_twice(tmp_path, c
     for k in range(2):
         assert main(["bench", "refine", "--objects", "1", "--size", "48", "--output-views", "1", "--steps", "12",
                      "--init", "hull", "--json", str(tmp_path / f"r{k}.json")]) == 0
-        runs.append(json.loads((tmp_path / f"r{k}.json").read_text())["budgets"][0])
-    assert "| 12 steps |" in capsys.readouterr().out
+        result = json.loads((tmp_path / f"r{k}.json").read_text())
+        runs.append(result["budgets"][0])
+    out = capsys.readouterr().out
+    assert "| 12 steps |" in out
+    # Equal steps pair exactly only on one machine: the result says which.
+    assert result["machine"]["threads"] >= 1 and result["machine"]["cpu_kernels"], result["machine"]
+    assert f"Machine: {result['machine']['device']}" in out
     first, second = runs
     assert first["steps"] == second["steps"] == 12 and first["minutes"] is None
     for key in ("psnr", "ssim", "albedo_psnr", "chamfer"):
