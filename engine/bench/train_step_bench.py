@@ -34,7 +34,8 @@ from lirm.engine.train.train_step import train_step, training_optimizer, trainin
 from lirm.engine.train.trainer import check_scene_views, scene_config_for
 from lirm.engine.train.training_sample import make_sample
 
-from .model_bench import _device_name, _resolve_device, _sync
+from .machine_facts import device_name
+from .model_bench import _resolve_device, _sync
 from .peak_memory import PeakMemory
 
 PHASES = ("update", "decode", "render_and_losses", "backward", "optimizer")
@@ -133,7 +134,7 @@ def run_train_bench(config: TrainBenchConfig, progress=None) -> TrainBenchResult
         finally:
             source.release()
         data_seconds = (time.perf_counter() - start) / batch
-    result = TrainBenchResult(preset=config.preset, stage=config.stage, device=_device_name(device), batch_scenes=batch,
+    result = TrainBenchResult(preset=config.preset, stage=config.stage, device=device_name(device), batch_scenes=batch,
                               samples_per_ray=stage.samples_per_ray,
                               rays_per_step=sum(t["origins"].shape[0] for per_update in samples[0].targets for t in per_update),
                               data_seconds_per_scene=data_seconds)
