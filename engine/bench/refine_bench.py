@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import ast
 import json
-from dataclasses import fields, replace
+from dataclasses import asdict, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +23,7 @@ from lirm.engine.refine import initial_fields
 from lirm.engine.refine.refinable_field import RefinableField
 from lirm.engine.refine.refiner import refine_field
 from lirm.engine.errors import LirmUserError
+from lirm.engine.export.photo_texture_fit import TextureFitConfig
 from lirm.engine.refine.config import LossWeights, RefineConfig
 
 from .machine_facts import describe, machine_facts
@@ -32,17 +33,23 @@ from .peak_memory import PeakMemory, release_memory
 SWAP_KEYS = tuple(f"swap_{name}_relight_psnr_{kind}" for name in SWAPS for kind in ("l", "h")) + EXPORTED_MATERIAL_KEYS
 
 
+def _literal(option: str, flag: str, example: str) -> tuple[str, object]:
+    """KEY and its Python-literal VALUE (numbers, tuples, True/False) from `flag`'s KEY=VALUE."""
+    key, sep, text = option.partition("=")
+    if not sep:
+        raise LirmUserError(f"{flag} {option!r}: write KEY=VALUE, e.g. {example}")
+    try:
+        value = ast.literal_eval(text)
+    except (ValueError, SyntaxError):
+        raise LirmUserError(f"{flag} {option!r}: {text!r} is not a number, tuple or True/False") from None
+    return key, tuple(value) if isinstance(value, list) else value
+
+
 def apply_options(config: RefineConfig, options: list[str]) -> RefineConfig:
     """KEY=VALUE settings onto a RefineConfig; `losses.NAME=W` sets a loss weight. Values are Python
     literals (numbers, tuples)."""
     for option in options:
-        key, sep, text = option.partition("=")
-        if not sep:
-            raise LirmUserError(f"--option {option!r}: write KEY=VALUE, e.g. losses.eikonal=0 or plane_resolutions=(128,)")
-        try:
-            value = ast.literal_eval(text)
-        except (ValueError, SyntaxError):
-            raise LirmUserError(f"--option {option!r}: {text!r} is not a number or tuple") from None
+        key, value = _literal(option, "--option", "losses.eikonal=0 or plane_resolutions=(128,)")
         if key.startswith("losses."):
             name = key[len("losses."):]
             if name not in {f.name for f in fields(LossWeights)}:
@@ -52,12 +59,25 @@ def apply_options(config: RefineConfig, options: list[str]) -> RefineConfig:
             if key not in {f.name for f in fields(RefineConfig)} or key == "losses":
                 raise LirmUserError(f"--option {option!r}: no setting {key!r}; settings: "
                                     f"{', '.join(f.name for f in fields(RefineConfig) if f.name != 'losses')}")
-            if isinstance(value, list):
-                value = tuple(value)
             if key == "plane_resolutions" and isinstance(value, int):
                 value = (value,)
             config = replace(config, **{key: value})
     return config
+
+
+def texture_fit_variant(options: list[str]) -> TextureFitConfig:
+    """The texture fit's default settings with KEY=VALUE changes (`--fit-option`)."""
+    names = {f.name for f in fields(TextureFitConfig)}
+    changes = {}
+    for option in options:
+        key, value = _literal(option, "--fit-option", "register_one_sample=False")
+        if key not in names:
+            raise LirmUserError(f"--fit-option {option!r}: no texture-fit setting {key!r}; settings: {', '.join(sorted(names))}")
+        changes[key] = value
+    try:
+        return TextureFitConfig(**changes)
+    except (TypeError, ValueError) as error:
+        raise LirmUserError(f"--fit-option {' '.join(options)}: {error}") from None
 
 
 def budget_label(minutes: float | None, config: RefineConfig) -> str:
@@ -67,13 +87,13 @@ def budget_label(minutes: float | None, config: RefineConfig) -> str:
 
 def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfig, base: RefineConfig, minutes: list[float | None],
                      init: str, progress=None, pictures: Path | None = None, true_lighting: bool = False,
-                     texture_fit: str = "on", swap_study: bool = False) -> dict:
+                     texture_fit: str = "on", swap_study: bool = False, variant_fit: TextureFitConfig | None = None) -> dict:
     """With base.inverse_rendering, also the material and relighting scores (and, with `pictures`,
     the relighting test's pictures there); `true_lighting`: the oracle lit by the inputs' true
     environment instead of the estimate from their backgrounds; `texture_fit`: "on", the relighting
     test's export fits its textures to the input photos (RelightConfig.fit_textures), "off", "both"
-    (the baked export scored too, under baked_ keys) or "search-both" (the fit without its metal search
-    scored too, under plain_ keys); `swap_study`: also the relighting with parts swapped for the truth's
+    (the baked export scored too, under baked_ keys) or "variant" (the fit with the settings
+    `variant_fit` scored too, under variant_ keys; both fits' seconds as fit_seconds); `swap_study`: also the relighting with parts swapped for the truth's
     (relight_swaps.py; the objects must carry the truth's G-buffers), under swap_ keys. A budget of None
     runs base.iterations steps with no wall-clock budget: the schedule then follows the steps alone, and
     the fit is the same twice on one machine (with a wall-clock budget it follows the time, even at step
@@ -85,12 +105,16 @@ def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfi
     if base.inverse_rendering:
         from lirm.engine.evaluation.relighting import RelightConfig, Relighter
 
+        if texture_fit == "variant" and variant_fit is None:
+            raise ValueError("texture_fit 'variant' needs the variant's settings (variant_fit)")
         relighter = Relighter(RelightConfig(fit_textures=texture_fit != "off", also_baked=texture_fit == "both",
-                                            also_plain_fit=texture_fit == "search-both", swap_study=swap_study),
+                                            variant_fit=variant_fit if texture_fit == "variant" else None,
+                                            swap_study=swap_study),
                               pictures=pictures)
-    paired = {"both": "baked_", "search-both": "plain_"}.get(texture_fit)
+    paired = {"both": "baked_", "variant": "variant_"}.get(texture_fit)
+    timed = ("fit_seconds",) + (("variant_fit_seconds",) if texture_fit == "variant" else ()) if texture_fit != "off" else ()
     keys = ("psnr", "ssim", "albedo_psnr", "roughness_psnr", "metallic_psnr", "chamfer", "seconds", "steps") + (
-        RELIGHT_KEYS if relighter else ()) + (tuple(f"{paired}{k}" for k in RELIGHT_KEYS) if paired else ()) + (
+        RELIGHT_KEYS + timed if relighter else ()) + (tuple(f"{paired}{k}" for k in RELIGHT_KEYS) if paired else ()) + (
         SWAP_KEYS if swap_study else ())
     try:
         for k, budget in enumerate(minutes):
@@ -109,7 +133,9 @@ def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfi
     finally:
         if relighter is not None:
             relighter.release()
-    return {"init": init, "lighting": "truth" if true_lighting else "estimate", "texture_fit": texture_fit, "settings": base.to_dict(),
+    variant = {"variant_fit": asdict(variant_fit)} if texture_fit == "variant" and variant_fit is not None else {}
+    return {"init": init, "lighting": "truth" if true_lighting else "estimate", "texture_fit": texture_fit, **variant,
+            "settings": base.to_dict(),
             "machine": machine_facts(base.device),
             "memory_method": meter.method, "budgets": budgets}
 
@@ -127,18 +153,12 @@ def refine_bench_table(result: dict, set_name: str) -> str:
                      f"{b['metallic_psnr']:.2f} | {b['chamfer']:.4f} | {b['steps']:.0f} | {b['seconds']:.0f} | "
                      f"{b['peak_bytes'] / 1e9:.2f} |")
     if result["budgets"] and "relight_psnr_l" in result["budgets"][0]:
-        lines += ["", "The relighting test (materials inverse-rendered):", "",
-                  "| budget | relight PSNR-H ↑ | relight PSNR-L ↑ |", "|---|---|---|"]
-        for b in result["budgets"]:
-            lines.append(f"| {b['budget']} | {b['relight_psnr_h']:.2f} | {b['relight_psnr_l']:.2f} |")
+        lines += ["", "The relighting test (materials inverse-rendered):", ""] + _relight_rows(result, "")
+        variant = ", ".join(f"{k}={v}" for k, v in _variant_changes(result).items()) or "the default settings"
         for prefix, what in (("baked_", "with the field's baked textures, not fitted to the photos"),
-                             ("plain_", "with the textures fitted to the photos without the metal search")):
-            if f"{prefix}relight_psnr_l" not in result["budgets"][0]:
-                continue
-            lines += ["", f"The same refined fields exported {what}:", "",
-                      "| budget | relight PSNR-H ↑ | relight PSNR-L ↑ |", "|---|---|---|"]
-            for b in result["budgets"]:
-                lines.append(f"| {b['budget']} | {b[prefix + 'relight_psnr_h']:.2f} | {b[prefix + 'relight_psnr_l']:.2f} |")
+                             ("variant_", f"with the textures fitted with {variant}")):
+            if f"{prefix}relight_psnr_l" in result["budgets"][0]:
+                lines += ["", f"The same refined fields exported {what}:", ""] + _relight_rows(result, prefix)
     if result["budgets"] and "swap_export_relight_psnr_l" in result["budgets"][0]:
         lines += ["", "Where the relighting error comes from (the export relit with parts swapped for the truth's; "
                   "relight_swaps.py), PSNR-L / PSNR-H:", "",
@@ -154,6 +174,23 @@ def refine_bench_table(result: dict, set_name: str) -> str:
     if "machine" in result:  # fits of equal steps pair exactly only on one machine (machine_facts.py)
         lines += ["", f"Machine: {describe(result['machine'])}."]
     return "\n".join(lines) + "\n"
+
+
+def _relight_rows(result: dict, prefix: str) -> list[str]:
+    """The relighting table's rows of `prefix`-ed scores, with the texture fit's seconds where it ran."""
+    timed = f"{prefix}fit_seconds" in result["budgets"][0]
+    lines = ["| budget | relight PSNR-H ↑ | relight PSNR-L ↑ |" + (" texture fit (s) |" if timed else ""),
+             "|---|---|---|" + ("---|" if timed else "")]
+    for b in result["budgets"]:
+        lines.append(f"| {b['budget']} | {b[prefix + 'relight_psnr_h']:.2f} | {b[prefix + 'relight_psnr_l']:.2f} |"
+                     + (f" {b[prefix + 'fit_seconds']:.1f} |" if timed else ""))
+    return lines
+
+
+def _variant_changes(result: dict) -> dict:
+    """The settings in which the variant texture fit differs from the default one."""
+    default = asdict(TextureFitConfig())
+    return {k: v for k, v in result.get("variant_fit", {}).items() if default.get(k) != v}
 
 
 def dumps(result: dict) -> str:

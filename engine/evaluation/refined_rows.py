@@ -171,7 +171,7 @@ def per_object_scores(model, objects: list[HeldoutObject], config: EvalConfig, r
         row = update_scores(config.updates, scores).to_dict()
         keys = ("psnr", "ssim", "albedo_psnr", "roughness_psnr", "metallic_psnr", "chamfer") + (
             RELIGHT_KEYS if relighter is not None else ())
-        baked = {k: float(np.mean(v)) for k, v in scores.items() if k.startswith(("baked_", "plain_", "swap_", "exported_"))}  # RelightConfig.also_*, swap_study
+        baked = {k: float(np.mean(v)) for k, v in scores.items() if k.startswith(("baked_", "variant_", "fit_", "swap_", "exported_"))}  # RelightConfig's extras
         rows.append({"object": obj.name, "start": refined.start, "seconds": refined.seconds, "steps": refined.steps,
                      **{k: row[k] for k in keys}, **baked})
     return rows

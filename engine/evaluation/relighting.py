@@ -94,9 +94,10 @@ class RelightConfig:
     # With the fit on: also score the export with the baked textures, under "baked_" keys (a paired
     # ablation of the fit on the same refined field: `lirm bench refine --materials --texture-fit both`).
     also_baked: bool = False
-    # With the fit on: also score the export fitted without the metal search, under "plain_" keys
-    # (`lirm bench refine --materials --texture-fit search-both`).
-    also_plain_fit: bool = False
+    # With the fit on: also score the export fitted with these settings instead (a TextureFitConfig),
+    # under "variant_" keys: a paired ablation of a texture-fit setting on the same refined field
+    # (`lirm bench refine --materials --texture-fit variant --fit-option KEY=VALUE`).
+    variant_fit: object | None = None
     # Also score the swap study (relight_swaps.py) on the scored export, under "swap_" keys: needs the
     # truth's G-buffers (heldout sets built with relight_gbuffers).
     swap_study: bool = False
@@ -139,18 +140,23 @@ class Relighter:
         with tempfile.TemporaryDirectory(prefix="lirm-relight-") as tmp:
             path = Path(tmp) / "asset.glb"
             try:
-                export_field(field_, path, config, context=self.ctx, photos=photos, lighting=lighting)
+                exported = export_field(field_, path, config, context=self.ctx, photos=photos, lighting=lighting)
             except NoSurfaceError:
                 for key in ("relight_psnr_h", "relight_psnr_l", "relight_ssim"):
                     scores.setdefault(key, []).append(float("nan"))
                 return
             model = load_model(path)  # what a user opens: the .glb read back, in its own (the field's) frame
+            if fitting:  # the fit's own time, to weigh a variant's against
+                scores.setdefault("fit_seconds", []).append(exported.seconds.get("texture_fit", float("nan")))
             extra = [("baked_", None)] if fitting and self.config.also_baked else []
-            if fitting and self.config.also_plain_fit:
-                extra.append(("plain_", TextureFitConfig(metal_search=False)))
+            if fitting and self.config.variant_fit is not None:
+                extra.append(("variant_", self.config.variant_fit))
             for prefix, fit in extra:
                 other = Path(tmp) / f"{prefix}asset.glb"
-                export_field(field_, other, replace(config, texture_fit=fit), context=self.ctx, photos=photos, lighting=lighting)
+                result = export_field(field_, other, replace(config, texture_fit=fit), context=self.ctx, photos=photos,
+                                      lighting=lighting)
+                if fit is not None:
+                    scores.setdefault(prefix + "fit_seconds", []).append(result.seconds.get("texture_fit", float("nan")))
                 other_scene = self.renderer.upload(load_model(other).meshes)
                 try:
                     self._score_scene(other_scene, obj, truth, outputs, scores, lpips_net, prefix=prefix)

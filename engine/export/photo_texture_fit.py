@@ -32,15 +32,14 @@ from typing import Callable
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from lirm.engine.lighting.camera_response import radiance_to_display_torch
-from lirm.engine.lighting.split_sum_shading import shade
 from lirm.engine.lighting.tabulated_lighting import TabulatedLighting
 
 from .metal_search import AS_FITTED, DIELECTRIC, METAL, choose_hypotheses
 from .photo_registration import PhotoSources, ViewWarps, photo_sources, read_photos
 from .surface_heights import SurfaceHeights
+from .texel_reads import TexelReads
 from .texture_bake import BakedTextures, dilate
 from .uv_atlas import UVMesh
 
@@ -97,6 +96,9 @@ class TextureFitConfig:
     register_smooth: float = 0.01  # weight of the lattice's smoothness (pixels², against a mean L1 of display values)
     register_anchor: float = 0.01  # weight of the mean squared offset (pixels²): the smallest warps that agree
     register_learning_rate: float = 0.05  # Adam, pixels a step at most
+    # The registration's fit shades one sub-sample of each pixel's footprint too, as the search does:
+    # its warps or heights are read per pixel, not per sub-sample.
+    register_one_sample: bool = True
     # Registration through the surface instead (surface_heights.py; the default): a register_heights x
     # register_heights map of heights along the normal over the atlas, shared by all photos, each
     # photo pixel read where its raised point projects, and the export's surface moved by it. 0: off
@@ -289,13 +291,6 @@ def _logit(values: np.ndarray) -> torch.Tensor:
     return torch.logit(torch.from_numpy(np.clip(values, 0.01, 0.99).astype(np.float32)))
 
 
-def _lookup(texture: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
-    """Bilinear (S, S, C) texture at (1, 1, N, 2) grid coordinates -> (N, C); row 0 is v near 0 (glTF),
-    grid_sample's y = -1, so the coordinates are uv * 2 - 1 as they are."""
-    return F.grid_sample(texture.permute(2, 0, 1)[None], grid, mode="bilinear", padding_mode="border",
-                         align_corners=False)[0, :, 0].T
-
-
 class _Shading:
     """The photometric error of texture logits at the sampled pixels, under the tabulated lighting."""
 
@@ -304,7 +299,7 @@ class _Shading:
         self.samples = samples
         self.light = tabulated if tabulated is not None else TabulatedLighting(lighting, samples.normal, samples.view,
                                                                                config.lighting_levels)
-        self.grid = (samples.uv * 2.0 - 1.0)[None, None]
+        self.reads: TexelReads | None = None  # made at the first step, when the textures' size is known
         self.clip_level = config.clip_level
         self.use_colour(samples.colour)
 
@@ -320,11 +315,15 @@ class _Shading:
     def errors(self, albedo_logit: torch.Tensor, roughness_logit: torch.Tensor, metallic_logit: torch.Tensor,
                colour: torch.Tensor | None = None) -> torch.Tensor:
         """(N, 3) absolute display-value error per pixel and channel (against `colour`, or the colours in use)."""
-        grid, samples = self.grid, self.samples
+        samples = self.samples
         clipped = self.clipped if colour is None else self._clipped(colour)
         colour = self.colour if colour is None else colour
-        shaded = shade(self.light, _lookup(torch.sigmoid(albedo_logit), grid), _lookup(torch.sigmoid(roughness_logit), grid)[:, 0],
-                       _lookup(torch.sigmoid(metallic_logit), grid)[:, 0], samples.normal, samples.view).radiance
+        if self.reads is None or self.reads.size != albedo_logit.shape[0]:
+            self.reads = TexelReads(samples.uv, albedo_logit.shape[0])
+        # all five channels in one read: albedo (3), roughness, metallic
+        texels = torch.sigmoid(torch.cat([albedo_logit, roughness_logit, metallic_logit], -1))
+        read = self.reads(texels)
+        shaded = self.light.shade(read[:, :3], read[:, 3], read[:, 4]).radiance
         if samples.footprint > 1:  # the pixel integrates its footprint in linear light
             shaded = shaded.reshape(-1, samples.footprint, 3).mean(1)
         predicted = radiance_to_display_torch(shaded)
@@ -422,15 +421,18 @@ def fit_textures(textures: BakedTextures, samples: PixelSamples, lighting, confi
     stopped, steps, choice, shift, heights = False, 0, None, None, None
     begin = baked
     prior = (torch.sigmoid(baked.roughness), torch.sigmoid(baked.metallic))
+    # One sub-sample of each pixel, for the fits that only choose or register (the tabulation's rows reused)
+    coarse = shading
+    if samples.footprint > 1 and ((searching and config.search_one_sample) or (registering and config.register_one_sample)):
+        coarse = _Shading(samples.one_sample(), lighting, config, shading.light.rows(slice(None, None, samples.footprint)))
     if registering:
-        shift, heights, steps, stopped = _register(shading, baked, config, prior, tick, should_stop)
+        registered = coarse if config.register_one_sample else shading
+        shift, heights, steps, stopped = _register(registered, baked, config, prior, tick, should_stop)
+        for other in (shading, coarse):  # every fit after it reads the registered colours
+            other.use_colour(registered.colour)
         done = steps
     if searching and not stopped:
-        search_shading = shading
-        if config.search_one_sample and samples.footprint > 1:
-            search_shading = _Shading(samples.one_sample(), lighting, config,
-                                      shading.light.rows(slice(None, None, samples.footprint)))
-            search_shading.use_colour(shading.colour)  # (the registered colours, when registered)
+        search_shading = coarse if config.search_one_sample else shading
         begin, prior, choice, taken, stopped = _search_metal(search_shading, baked, textures.base_color.shape[0], config,
                                                               tick, should_stop)
         steps += taken

@@ -114,17 +114,31 @@ def shade(lighting, albedo: torch.Tensor, roughness: torch.Tensor, metallic: tor
     v = view / view.norm(dim=-1, keepdim=True).clamp(min=1e-12)
     cos = (n * v).sum(-1)
     n_dot_v = cos.clamp(1e-4, 1.0)
-    m = metallic[:, None]
-    diffuse_colour = albedo * (1.0 - m)
-    f0 = 0.04 * (1.0 - m) + albedo * m
     ab = lighting.brdf(n_dot_v, roughness)
-    a, b = ab[:, :1], ab[:, 1:]
     reflected = 2.0 * cos[:, None] * n - v  # GLSL reflect(-v, n)
     specular_light = lighting.prefiltered(reflected, roughness)
     irradiance = lighting.irradiance_over_pi(n)
+    return mix_split_sum(albedo, roughness, metallic, fresnel_weight(n_dot_v), ab, specular_light, irradiance,
+                         multiple_scattering)
 
+
+def fresnel_weight(n_dot_v: torch.Tensor) -> torch.Tensor:
+    """(N, 1) Schlick's (1 - N.V)^5: fixed wherever the geometry is (tabulated_lighting.py keeps it)."""
+    return (1.0 - n_dot_v)[:, None] ** 5
+
+
+def mix_split_sum(albedo: torch.Tensor, roughness: torch.Tensor, metallic: torch.Tensor, fresnel: torch.Tensor,
+                  ab: torch.Tensor, specular_light: torch.Tensor, irradiance: torch.Tensor,
+                  multiple_scattering: bool = True) -> ShadingTerms:
+    """The material half of `shade`: the lighting's terms at each point (the BRDF table's (A, B), the
+    prefiltered specular along the reflection, the irradiance / pi, and `fresnel_weight` of its N.V)
+    mixed by the albedo, roughness (clamped) and metallic (clamped), as mesh_pbr.frag mixes them."""
+    m = metallic[:, None]
+    diffuse_colour = albedo * (1.0 - m)
+    f0 = 0.04 * (1.0 - m) + albedo * m
+    a, b = ab[:, :1], ab[:, 1:]
     fresnel_roughness = torch.maximum((1.0 - roughness)[:, None].expand_as(f0), f0) - f0
-    k_s = f0 + fresnel_roughness * (1.0 - n_dot_v)[:, None] ** 5
+    k_s = f0 + fresnel_roughness * fresnel
     fss_ess = k_s * a + b
     if multiple_scattering:
         ems = 1.0 - (a + b)

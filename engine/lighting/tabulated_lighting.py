@@ -12,8 +12,15 @@ panorama's resolution) and read from it per pixel: its lobes are never narrower 
 texels, so the grid resolves them (within a fraction of a per cent; tested), and computing the lobe
 sums for a million photo pixels directly took 85 s of the demo's 171 s texture fit.
 
-It keeps `split_sum_shading.shade`'s lighting interface; the directions `shade` passes are ignored
-(they are the tabulated ones), so it must be called on exactly the pixels it was built for.
+The BRDF table's (A, B) are tabulated too, per pixel at its own N.V and at every row of the table
+(BRDF_ROWS, the rows of panorama_lighting.brdf_table): for fixed N.V a bilinear read of the table is
+linear in roughness between its row centres, so reading these per-pixel rows linearly is the same
+lookup. With the N.V and Schlick's weight kept as well, `shade` (this class's own) does per step
+only what the materials change: two gathers and the split-sum mix. On the demo's 1.2M sub-samples
+that halved the shading's step (README, "The texture fit's pace").
+
+It also keeps `split_sum_shading.shade`'s lighting interface; the directions `shade` passes are
+ignored (they are the tabulated ones), so it must be called on exactly the pixels it was built for.
 """
 
 from __future__ import annotations
@@ -24,10 +31,14 @@ import torch
 from lirm.renderer.environment import Environment
 
 from .panorama_lighting import PanoramaLighting
-from .split_sum_shading import equirect_lookup
+from .split_sum_shading import ShadingTerms, equirect_lookup, fresnel_weight, mix_split_sum
 
 # Directions per panorama texel side on the grid a panorama's terms are computed on first.
 PANORAMA_GRID_FACTOR = 8
+# Roughness rows the BRDF table is tabulated at, at (i + 0.5) / rows: panorama_lighting.brdf_table's
+# size, so the fitted lighting's table is read exactly (another lighting's table of other rows is
+# interpolated between these).
+BRDF_ROWS = 32
 
 
 class _OnDirectionGrid:
@@ -61,13 +72,19 @@ class TabulatedLighting:
         self.count = normals.shape[0]
         n = normals / normals.norm(dim=-1, keepdim=True).clamp(min=1e-12)
         v = views / views.norm(dim=-1, keepdim=True).clamp(min=1e-12)
-        reflected = 2.0 * (n * v).sum(-1, keepdim=True) * n - v  # GLSL reflect(-v, n), as `shade` takes it
+        cos = (n * v).sum(-1)
+        reflected = 2.0 * cos[:, None] * n - v  # GLSL reflect(-v, n), as `shade` takes it
+        self.n_dot_v = cos.clamp(1e-4, 1.0)  # as `shade` clamps it
+        self.fresnel = fresnel_weight(self.n_dot_v)
         roughness_levels = torch.linspace(0.0, 1.0, levels, dtype=n.dtype, device=n.device)
-        irradiance, specular = [], []
+        irradiance, specular, brdf = [], [], []
+        row_roughness = (torch.arange(BRDF_ROWS, dtype=n.dtype, device=n.device) + 0.5) / BRDF_ROWS
         with torch.no_grad():
             grid = _OnDirectionGrid(lighting, roughness_levels) if isinstance(lighting, PanoramaLighting) else None
             for start in range(0, self.count, chunk):
                 part_n, part_r = n[start:start + chunk], reflected[start:start + chunk]
+                part_cos = self.n_dot_v[start:start + chunk]
+                brdf.append(torch.stack([lighting.brdf(part_cos, torch.full_like(part_cos, float(r))) for r in row_roughness], 1))
                 if grid is not None:
                     irradiance.append(grid.irradiance_over_pi(part_n))
                     specular.append(grid.prefiltered_levels(part_r))
@@ -78,12 +95,16 @@ class TabulatedLighting:
                                              for r in roughness_levels], dim=1))
         self.irradiance = torch.cat(irradiance) if irradiance else n.new_zeros((0, 3))
         self.specular = torch.cat(specular) if specular else n.new_zeros((0, levels, 3))  # (N, levels, 3)
+        self.brdf_rows = torch.cat(brdf) if brdf else n.new_zeros((0, BRDF_ROWS, 2))  # (N, BRDF_ROWS, 2)
 
     def rows(self, index: torch.Tensor | slice) -> "TabulatedLighting":
         """The tabulation of a subset of its pixels (`index` into them), without computing anything again."""
         part = object.__new__(TabulatedLighting)
         part.lighting, part.levels = self.lighting, self.levels
-        part.irradiance, part.specular = self.irradiance[index], self.specular[index]
+        # contiguous copies: the gathers read them as flat tables
+        part.irradiance, part.specular = self.irradiance[index].contiguous(), self.specular[index].contiguous()
+        part.brdf_rows, part.n_dot_v = self.brdf_rows[index].contiguous(), self.n_dot_v[index].contiguous()
+        part.fresnel = self.fresnel[index].contiguous()
         part.count = part.irradiance.shape[0]
         return part
 
@@ -97,11 +118,31 @@ class TabulatedLighting:
 
     def prefiltered(self, directions: torch.Tensor, roughness: torch.Tensor) -> torch.Tensor:
         self._check(directions.shape[0])
-        x = roughness.clamp(0.0, 1.0) * (self.levels - 1)
-        below = x.detach().floor().long().clamp(max=self.levels - 2)
-        t = (x - below.to(x.dtype))[:, None]
-        rows = torch.arange(self.count, device=x.device)
-        return self.specular[rows, below] * (1.0 - t) + self.specular[rows, below + 1] * t
+        return _between_rows(self.specular, roughness.clamp(0.0, 1.0) * (self.levels - 1))
 
     def brdf(self, n_dot_v: torch.Tensor, roughness: torch.Tensor) -> torch.Tensor:
-        return self.lighting.brdf(n_dot_v, roughness)
+        self._check(n_dot_v.shape[0])
+        return _between_rows(self.brdf_rows, roughness * BRDF_ROWS - 0.5)
+
+    def shade(self, albedo: torch.Tensor, roughness: torch.Tensor, metallic: torch.Tensor,
+              multiple_scattering: bool = True) -> ShadingTerms:
+        """split_sum_shading.shade at the tabulated pixels (the same model and values), computing only
+        what depends on the materials."""
+        self._check(albedo.shape[0])
+        roughness = roughness.clamp(0.0, 1.0)
+        metallic = metallic.clamp(0.0, 1.0)
+        ab = _between_rows(self.brdf_rows, roughness * BRDF_ROWS - 0.5)
+        specular = _between_rows(self.specular, roughness * (self.levels - 1))
+        return mix_split_sum(albedo, roughness, metallic, self.fresnel, ab, specular, self.irradiance, multiple_scattering)
+
+
+def _between_rows(table: torch.Tensor, position: torch.Tensor) -> torch.Tensor:
+    """(N, C): each pixel's (N, R, C) rows read linearly at its fractional row `position` (N,), clamped
+    to the first and last rows (GL_LINEAR's clamp-to-edge). Differentiable in `position` only."""
+    rows = table.shape[1]
+    x = position.clamp(0.0, rows - 1.0)
+    below = x.detach().floor().long().clamp(max=rows - 2)
+    t = (x - below.to(x.dtype))[:, None]
+    flat = table.reshape(-1, table.shape[2])
+    first = torch.arange(table.shape[0], device=x.device) * rows + below
+    return flat.index_select(0, first) * (1.0 - t) + flat.index_select(0, first + 1) * t

@@ -39,11 +39,14 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--lighting", choices=("estimate", "truth"), default="estimate",
                         help="with --materials: inverse-render under the capture-style estimate from the inputs' backgrounds "
                              "(default), or under the environment that really lit them (an oracle: what the estimate costs)")
-    parser.add_argument("--texture-fit", choices=("on", "off", "both", "search-both"), default="on",
+    parser.add_argument("--texture-fit", choices=("on", "off", "both", "variant"), default="on",
                         help="with --materials: the relighting test's export fits its textures to the input photos (on, as "
                              "`lirm export` does for a capture refined with materials), keeps the field's baked ones (off), "
                              "scores both exports of the same refined field (both: a paired ablation), or scores the fit "
-                             "with and without its metal search (search-both)")
+                             "with its default settings and with the --fit-option changes (variant), each with its time")
+    parser.add_argument("--fit-option", action="append", default=[], metavar="KEY=VALUE",
+                        help="with --texture-fit variant: a texture-fit setting of the variant, e.g. metal_search=False, "
+                             "footprint=1; repeatable")
     parser.add_argument("--swap-study", action="store_true",
                         help="with --materials: also relight the export with parts swapped for the truth's (albedo, all "
                              "materials, geometry, the albedo's detail or coarse colour): where the relighting error comes from")
@@ -52,7 +55,7 @@ def add_parser(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ...bench.refine_bench import apply_options, dumps, refine_bench_table, run_refine_bench
+    from ...bench.refine_bench import apply_options, dumps, refine_bench_table, run_refine_bench, texture_fit_variant
     from ...evaluation.evaluate import EvalConfig
     from ...io.atomic_files import atomic_write
     from ...refine.config import refine_preset
@@ -64,6 +67,10 @@ def run(args: argparse.Namespace) -> int:
         raise LirmUsageError("--lighting truth lights the inverse rendering, which only --materials runs; add --materials")
     if args.texture_fit != "on" and not args.materials:
         raise LirmUsageError("--texture-fit changes the relighting test's export, which only --materials runs; add --materials")
+    if (args.texture_fit == "variant") != bool(args.fit_option):
+        raise LirmUsageError("--texture-fit variant scores a texture fit with other settings: give them with --fit-option "
+                             "KEY=VALUE (and --fit-option only with --texture-fit variant)")
+    variant = texture_fit_variant(args.fit_option) if args.fit_option else None  # (its errors before any work)
     if args.swap_study and (not args.materials or args.warm_start):
         raise LirmUsageError("--swap-study takes apart the relighting test, which only --materials runs (and not with "
                              "--warm-start); add --materials")
@@ -97,7 +104,8 @@ def run(args: argparse.Namespace) -> int:
             result = run_refine_bench(source.model, objects, EvalConfig(output_views=args.output_views), base, budgets,
                                       args.init, progress=bar_updater(bar), pictures=args.pictures,
                                       true_lighting=args.lighting == "truth", texture_fit=args.texture_fit,
-                                      swap_study=args.swap_study)
+                                      swap_study=args.swap_study,
+                                      variant_fit=variant)
         finally:
             bar.close()
         table = refine_bench_table(result, args.set)

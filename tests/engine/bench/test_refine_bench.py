@@ -11,21 +11,25 @@ from lirm.engine.cli import main
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("texture_fit, prefix, title", [("both", "baked_", "exported with the field's baked textures"),
-                                                        ("search-both", "plain_", "without the metal search")])
+@pytest.mark.parametrize("texture_fit, prefix, title", [
+    (["both"], "baked_", "exported with the field's baked textures"),
+    (["variant", "--fit-option", "metal_search=False"], "variant_", "with the textures fitted with metal_search=False")])
 def test_bench_refine_with_materials_scores_them_and_draws_the_relighting(tmp_path, capsys, texture_fit, prefix, title):
     assert main(["bench", "refine", "--objects", "1", "--size", "48", "--output-views", "1", "--minutes", "0.05",
                  "--init", "hull", "--materials", "--pictures", str(tmp_path / "pictures"), "--json", str(tmp_path / "r.json"),
-                 "--texture-fit", texture_fit]) == 0
+                 "--texture-fit"] + texture_fit) == 0
     table = capsys.readouterr().out
     assert "| budget | PSNR ↑ | SSIM ↑ | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ | CD ↓ |" in table
     assert "| budget | relight PSNR-H ↑ | relight PSNR-L ↑ |" in table
     budget = json.loads((tmp_path / "r.json").read_text())["budgets"][0]
     assert all(np.isfinite(budget[k]) for k in ("roughness_psnr", "metallic_psnr", "relight_psnr_h", "relight_psnr_l"))
-    # --texture-fit both: the same field's export with its baked textures is scored too, apart; search-both:
-    # the same field's export fitted without the metal search.
+    # --texture-fit both: the same field's export with its baked textures is scored too, apart; variant:
+    # the same field's export fitted with other settings (here without the metal search), both fits timed.
     assert title in table
     assert np.isfinite(budget[prefix + "relight_psnr_l"]) and budget[prefix + "relight_psnr_l"] != budget["relight_psnr_l"]
+    assert budget["fit_seconds"] > 0
+    if prefix == "variant_":
+        assert budget["variant_fit_seconds"] > 0 and "texture fit (s) |" in table
     assert [p.name for p in (tmp_path / "pictures").iterdir()] == ["hull_0.05_min__vase_0.png"]
 
 
@@ -37,6 +41,17 @@ def test_bench_refine_pictures_need_materials(tmp_path, capsys):
 def test_bench_refine_texture_fit_needs_materials(capsys):
     assert main(["bench", "refine", "--objects", "1", "--texture-fit", "off"]) == 2
     assert "add --materials" in capsys.readouterr().err
+
+
+def test_bench_refine_variant_needs_its_settings_and_they_must_exist(capsys):
+    assert main(["bench", "refine", "--objects", "1", "--materials", "--texture-fit", "variant"]) == 2
+    assert "--fit-option KEY=VALUE" in capsys.readouterr().err
+    assert main(["bench", "refine", "--objects", "1", "--materials", "--fit-option", "footprint=1"]) == 2
+    assert "only with --texture-fit variant" in capsys.readouterr().err
+    assert main(["bench", "refine", "--objects", "1", "--materials", "--texture-fit", "variant", "--fit-option", "foot=1"]) != 0
+    assert "no texture-fit setting 'foot'" in capsys.readouterr().err
+    assert main(["bench", "refine", "--objects", "1", "--materials", "--texture-fit", "variant", "--fit-option", "footprint=0"]) != 0
+    assert "footprint must be >= 1" in capsys.readouterr().err
 
 
 def test_bench_refine_true_lighting_needs_materials(capsys):

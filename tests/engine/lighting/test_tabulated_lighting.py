@@ -75,3 +75,28 @@ def test_a_subset_of_its_rows_is_the_tabulation_of_those_pixels():
     torch.testing.assert_close(every_third.specular, direct.specular)
     with pytest.raises(ValueError, match="tabulated for 20 pixels"):
         every_third.irradiance_over_pi(normals)
+
+
+def test_its_own_shading_is_shade_and_its_brdf_the_lighting_table_read_exactly():
+    """`TabulatedLighting.shade` computes only what the materials change: the same radiance and gradients
+    as split_sum_shading.shade on the same table; its per-pixel BRDF rows are the panorama's table read
+    at the pixel's N.V, so between rows it is the bilinear lookup itself."""
+    panorama = PanoramaLighting.from_environment(make_procedural_environment("studio", width=128), height=16)
+    normals, views = _pixels(300, seed=5)
+    table = TabulatedLighting(panorama, normals, views)
+    g = torch.Generator().manual_seed(6)
+    albedo, metallic = torch.rand(300, 3, generator=g), torch.rand(300, generator=g)
+    roughness = torch.cat([torch.rand(298, generator=g), torch.tensor([0.0, 1.0])])
+    n_dot_v = (normals * views).sum(-1).clamp(1e-4, 1.0)
+    torch.testing.assert_close(table.brdf(n_dot_v, roughness), panorama.brdf(n_dot_v, roughness), atol=1e-6, rtol=1e-5)
+    inputs = [t.clone().requires_grad_(True) for t in (albedo, roughness, metallic)]
+    again = [t.clone().requires_grad_(True) for t in (albedo, roughness, metallic)]
+    fast = table.shade(*inputs).radiance
+    general = shade(table, *again, normals, views).radiance
+    torch.testing.assert_close(fast, general, atol=1e-6, rtol=1e-5)
+    fast.sum().backward()
+    general.sum().backward()
+    for ours, theirs in zip(inputs, again):
+        torch.testing.assert_close(ours.grad, theirs.grad, atol=1e-5, rtol=1e-4)
+    part = table.rows(slice(None, None, 3))
+    torch.testing.assert_close(part.shade(albedo[::3], roughness[::3], metallic[::3]).radiance, fast[::3].detach())
