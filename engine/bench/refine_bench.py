@@ -70,7 +70,7 @@ def texture_fit_variant(options: list[str]) -> TextureFitConfig:
     names = {f.name for f in fields(TextureFitConfig)}
     changes = {}
     for option in options:
-        key, value = _literal(option, "--fit-option", "register_one_sample=False")
+        key, value = _literal(option, "--fit-option", "metal_search=False")
         if key not in names:
             raise LirmUserError(f"--fit-option {option!r}: no texture-fit setting {key!r}; settings: {', '.join(sorted(names))}")
         changes[key] = value
