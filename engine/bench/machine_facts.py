@@ -9,24 +9,9 @@ So figures are only paired when these facts match.
 
 from __future__ import annotations
 
-import platform
-
 import torch
 
-
-def device_name(device: torch.device | str = "cpu") -> str:
-    """The GPU's name, or the CPU's model name as /proc/cpuinfo gives it."""
-    device = torch.device(device)
-    if device.type == "cuda":
-        return torch.cuda.get_device_name(device)
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
+from lirm.engine.hardware import device_name
 
 
 def machine_facts(device: torch.device | str = "cpu") -> dict:

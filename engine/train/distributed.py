@@ -8,11 +8,12 @@ seed includes the rank); DistributedDataParallel averages the gradients.
 from __future__ import annotations
 
 import os
-import platform
 from dataclasses import dataclass
 
 import torch
 import torch.distributed as dist
+
+from lirm.engine.hardware import device_name
 
 
 @dataclass(frozen=True)
@@ -50,13 +51,8 @@ def hardware_description(info: ProcessGroupInfo) -> str:
     """What a run trained on, for its run.json and the model card, e.g. "1 x NVIDIA H100 80GB HBM3"."""
     if info.device.type == "cuda":
         return f"{info.world_size} x {torch.cuda.get_device_name(info.device)}"
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as f:
-            cpu = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), cpu)
-    except OSError:
-        pass
-    return f"{info.world_size} process(es) on CPU: {cpu}, {os.cpu_count()} cores, {torch.get_num_threads()} torch threads"
+    return (f"{info.world_size} process(es) on CPU: {device_name('cpu')}, {os.cpu_count()} cores, "
+            f"{torch.get_num_threads()} torch threads")
 
 
 def shutdown(info: ProcessGroupInfo) -> None:

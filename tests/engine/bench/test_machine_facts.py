@@ -1,6 +1,7 @@
 import torch
 
-from lirm.engine.bench.machine_facts import describe, device_name, machine_facts
+from lirm.engine.bench.machine_facts import describe, machine_facts
+from lirm.engine.hardware import device_name
 
 
 def test_the_facts_name_this_cpu_its_kernels_threads_and_torch():
