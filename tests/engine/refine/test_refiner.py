@@ -69,14 +69,17 @@ def test_batches_can_be_drawn_only_from_rays_that_meet_the_hull(sphere_views):
     through = sphere_views.through_grid(grid, 1.0)
     chosen = through.uniform_index
     assert chosen is not None and 0 < len(chosen) < sphere_views.pixels
-    # Every object pixel's ray meets the hull; the chosen ones are exactly those that render non-empty
-    # (a ray missing the grid has no sample at all, whatever the field).
+    # Every object pixel's ray meets the hull; the chosen ones are those that render non-empty. A ray
+    # left out renders (nearly) empty whatever the field: the render's jittered samples may graze a
+    # voxel corner that the check's fixed steps passed by (seen: 1e-5 of opacity), nothing more.
     assert bool(torch.isin((sphere_views.alphas > 0.5).nonzero(as_tuple=True)[0], chosen).all())
     field = _tiny_field().field()
-    out = render_ray_batch(field, sphere_views.origins, sphere_views.directions, grid, 0.05, 48, 8)
+    with torch.no_grad():  # only the opacities are looked at
+        out = render_ray_batch(field, sphere_views.origins, sphere_views.directions, grid, 0.05, 48, 8,
+                               generator=torch.Generator().manual_seed(0))
     missed = torch.ones(sphere_views.pixels, dtype=torch.bool)
     missed[chosen] = False
-    assert float(out.opacity[missed].abs().max()) == 0.0 and float(out.opacity[chosen].max()) > 0.0
+    assert float(out.opacity[missed].abs().max()) < 1e-3 and float(out.opacity[chosen].max()) > 0.1
     batch = through.sample_rays(400, 0.25, torch.Generator().manual_seed(0))
     uniform = batch[:300]  # the edge share comes after the uniform one
     assert bool(torch.isin(uniform, chosen).all())
