@@ -93,8 +93,9 @@ def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfi
     environment instead of the estimate from their backgrounds; `texture_fit`: "on", the relighting
     test's export fits its textures to the input photos (RelightConfig.fit_textures), "off", "both"
     (the baked export scored too, under baked_ keys) or "variant" (the fit with the settings
-    `variant_fit` scored too, under variant_ keys; both fits' seconds as fit_seconds); `swap_study`: also the relighting with parts swapped for the truth's
-    (relight_swaps.py; the objects must carry the truth's G-buffers), under swap_ keys. A budget of None
+    `variant_fit` scored too, under variant_ keys; both fits' seconds as fit_seconds); `swap_study`:
+    also the relighting with parts swapped for the truth's (relight_swaps.py; the objects must carry
+    the truth's G-buffers), under swap_ keys. A budget of None
     runs base.iterations steps with no wall-clock budget: the schedule then follows the steps alone, and
     the fit is the same twice on one machine (with a wall-clock budget it follows the time, even at step
     0); across machines it differs in the last bits and then more (machine_facts.py), so the result

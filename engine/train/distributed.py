@@ -50,7 +50,7 @@ def init_process_group(device: str = "auto") -> ProcessGroupInfo:
 def hardware_description(info: ProcessGroupInfo) -> str:
     """What a run trained on, for its run.json and the model card, e.g. "1 x NVIDIA H100 80GB HBM3"."""
     if info.device.type == "cuda":
-        return f"{info.world_size} x {torch.cuda.get_device_name(info.device)}"
+        return f"{info.world_size} x {device_name(info.device)}"
     return (f"{info.world_size} process(es) on CPU: {device_name('cpu')}, {os.cpu_count()} cores, "
             f"{torch.get_num_threads()} torch threads")
 
