@@ -85,7 +85,9 @@ class TabulatedLighting:
             for start in range(0, self.count, chunk):
                 part_n, part_r = n[start:start + chunk], reflected[start:start + chunk]
                 part_cos = self.n_dot_v[start:start + chunk]
-                brdf.append(torch.stack([lighting.brdf(part_cos, torch.full_like(part_cos, float(r))) for r in row_roughness], 1))
+                # every row at once: one lookup of the table for (pixel, row) pairs, pixel-major
+                pairs_cos = part_cos.repeat_interleave(BRDF_ROWS)
+                brdf.append(lighting.brdf(pairs_cos, row_roughness.repeat(part_cos.shape[0])).reshape(-1, BRDF_ROWS, 2))
                 if grid is not None:
                     irradiance.append(grid.irradiance_over_pi(part_n))
                     specular.append(grid.prefiltered_levels(part_r))
