@@ -168,10 +168,15 @@ class ViewportPanel:
         sets = [(app.capture_cameras, INPUT_COLOUR)]
         if app.state.guidance:
             sets.append((app.suggested_cameras, SUGGESTED_COLOUR))
+        # Every segment's ends projected in one call: a projection per segment rebuilt the view's camera
+        # each time, and at the redraw rate of a running job that kept a core busy (README, "The app").
         for cameras, colour in sets:
-            for camera in cameras:
-                for a, b in frustum_lines(camera, app.world_from_capture, depth):
-                    xy, front = app.viewport.project(np.stack([a, b]), width, height)
-                    if front.all():
-                        draw.add_line(imgui.ImVec2(origin.x + xy[0, 0], origin.y + xy[0, 1]),
-                                      imgui.ImVec2(origin.x + xy[1, 0], origin.y + xy[1, 1]), colour, 1.5)
+            segments = [pair for camera in cameras for pair in frustum_lines(camera, app.world_from_capture, depth)]
+            if not segments:
+                continue
+            xy, front = app.viewport.project(np.asarray(segments, np.float64).reshape(-1, 3), width, height)
+            xy, front = xy.reshape(-1, 2, 2), front.reshape(-1, 2).all(axis=1)
+            for (a, b), shown in zip(xy, front):
+                if shown:
+                    draw.add_line(imgui.ImVec2(origin.x + a[0], origin.y + a[1]), imgui.ImVec2(origin.x + b[0], origin.y + b[1]),
+                                  colour, 1.5)
