@@ -29,9 +29,11 @@ from .panels.viewport_panel import ViewportPanel
 log = logging.getLogger("lirm.app")
 
 # Redraws a second when nothing happens (input wakes the window at once) and while work runs. Every
-# frame redraws the whole window, which costs tens of milliseconds on a software GL (llvmpipe).
+# frame redraws the whole window, about 150 ms of CPU on a software GL (llvmpipe, 2 cores): at 10 a
+# second while a refinement ran, the window took the cores from it (74 steps in its 30 s at 5, 164 at 2:
+# README, "The app"). Twice a second still shows the progress; input draws at full rate.
 IDLE_FPS = 0.25
-WORKING_FPS = 10.0
+WORKING_FPS = 2.0
 
 
 @dataclass(frozen=True)

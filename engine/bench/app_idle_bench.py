@@ -10,6 +10,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,21 +40,31 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+@contextmanager
+def window_display(env: dict):
+    """`env` with a DISPLAY: the one given, else a private Xvfb's for the duration."""
+    if env.get("DISPLAY"):
+        yield env
+        return
+    if shutil.which("Xvfb") is None:
+        raise LirmUserError("no display and no Xvfb to start one (apt-get install xvfb; `make setup` installs it)")
+    read_fd, write_fd = os.pipe()
+    xvfb = subprocess.Popen(["Xvfb", "-displayfd", str(write_fd), "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
+                            pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(write_fd)
+    with os.fdopen(read_fd) as pipe:
+        display = ":" + pipe.readline().strip()
+    try:
+        yield dict(env, DISPLAY=display)
+    finally:
+        xvfb.terminate()
+        xvfb.wait(timeout=10)
+
+
 def measure_idle(capture: Path | None = None, settle: float = 20.0, seconds: float = 30.0,
                  command: list[str] | None = None) -> IdleFigures:
     """`command` replaces `lirm app` (e.g. another build of the app, to compare)."""
-    with tempfile.TemporaryDirectory(prefix="lirm-idle-") as tmp:
-        env = dict(os.environ, XDG_CONFIG_HOME=tmp)
-        xvfb = None
-        if not env.get("DISPLAY"):
-            if shutil.which("Xvfb") is None:
-                raise LirmUserError("no display and no Xvfb to start one (apt-get install xvfb; `make setup` installs it)")
-            read_fd, write_fd = os.pipe()
-            xvfb = subprocess.Popen(["Xvfb", "-displayfd", str(write_fd), "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
-                                    pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-            os.close(write_fd)
-            with os.fdopen(read_fd) as pipe:
-                env["DISPLAY"] = ":" + pipe.readline().strip()
+    with tempfile.TemporaryDirectory(prefix="lirm-idle-") as tmp, window_display(dict(os.environ, XDG_CONFIG_HOME=tmp)) as env:
         args = command or [sys.executable, "-m", "lirm.engine.cli", "app"] + ([str(capture)] if capture else ["--new"])
         app = subprocess.Popen(args, env=env, cwd=tmp, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         try:
@@ -69,7 +80,4 @@ def measure_idle(capture: Path | None = None, settle: float = 20.0, seconds: flo
                 app.wait(timeout=20)
             except subprocess.TimeoutExpired:
                 app.kill()
-            if xvfb is not None:
-                xvfb.terminate()
-                xvfb.wait(timeout=10)
     return IdleFigures(settle, elapsed, used, str(capture) if capture else "an empty project")
