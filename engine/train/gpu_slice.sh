@@ -46,8 +46,9 @@ if [ "${TRAIN_BENCH:-0}" = 1 ]; then
   timeout ${T_TRAIN_BENCH:-150} $lirm bench train --preset small --device $device --batch-scenes "${BATCH_SCENES:-16}" \
     --checkpointing both --steps 2 --profile --json "$work/bench_train.json" 2>&1 | grep -v USDT
 fi
-# One process's synthetic-scene rate on this machine's EGL (the training runs many such processes).
-timeout ${T_BENCH:-45} $lirm bench synth --scenes 6 --views 8 --size 256
+# One process's synthetic-scene rate on this machine's EGL (the training runs many such processes;
+# SYNTH_SCENES=1 in the CPU dry run, where 6 took 31 s of its 128).
+timeout ${T_BENCH:-45} $lirm bench synth --scenes "${SYNTH_SCENES:-6}" --views 8 --size 256
 echo "[$(left) s left] timings done"
 
 resume=()

@@ -25,11 +25,13 @@ RESUME = ROOT / "resources" / "checkpoints" / "lirm-small-resume.safetensors"
 @pytest.mark.skipif(not RESUME.exists(), reason="no `small` weights to resume in this checkout")
 def test_a_slice_dry_run_resumes_trains_and_brings_back_weights_that_resume_later(tmp_path):
     out, work = tmp_path / "out", tmp_path / "work"
-    env = dict(os.environ, DEVICE="cpu", OUT=str(out), SLICE_WORK=str(work), BATCH_SCENES="1", WORKERS="1",
+    env = dict(os.environ, DEVICE="cpu", OUT=str(out), SLICE_WORK=str(work), BATCH_SCENES="1", WORKERS="1", SYNTH_SCENES="1",
                PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}")
     # Output to a file, not a pipe: the script's deadline watchdog may outlive it by a few seconds.
     with open(tmp_path / "slice.log", "w") as log:
-        done = subprocess.run(["bash", "engine/train/gpu_slice.sh", "180"], cwd=ROOT, env=env, stdout=log,
+        # 165 s: the first SIGINT 75 s before the end, after about 80 s of training (the first step
+        # took 48-79 s here), the second 25 s later; one scene for the synth bench (6 took 31 s).
+        done = subprocess.run(["bash", "engine/train/gpu_slice.sh", "165"], cwd=ROOT, env=env, stdout=log,
                               stderr=subprocess.STDOUT, timeout=420)
     text = (tmp_path / "slice.log").read_text()
     assert done.returncode == 0, text[-3000:]
