@@ -36,6 +36,7 @@ import torch
 from lirm.engine.lighting.camera_response import radiance_to_display_torch
 from lirm.engine.lighting.tabulated_lighting import TabulatedLighting
 
+from .fit_resolution import averaged_down, carried_up, fit_size_for, texels_per_photo_pixel
 from .metal_search import AS_FITTED, DIELECTRIC, METAL, choose_hypotheses
 from .photo_registration import PhotoSources, ViewWarps, photo_sources, read_photos
 from .surface_heights import SurfaceHeights
@@ -107,6 +108,11 @@ class TextureFitConfig:
     height_smooth: float = 0.1  # weight of the height map's smoothness (units of register_max_height squared)
     height_anchor: float = 0.01  # weight of the mean squared height (the same units)
     height_learning_rate: float = 0.002  # Adam, field units a step at most
+    # The size the textures are fitted at (fit_resolution.py): None, the largest halving of the
+    # export's size at which a photo pixel spans at most `max_texels_per_pixel` texels (median); an
+    # int, that size. The fit's change is carried back up to the export's size.
+    fit_size: int | None = None
+    max_texels_per_pixel: float = 2.5
 
     def __post_init__(self) -> None:
         if self.steps < 0:
@@ -120,6 +126,9 @@ class TextureFitConfig:
                              f"register_max_shift, got {self.register_grid}, {self.register_steps}, {self.register_max_shift}")
         if self.register_heights == 1 or self.register_heights < 0:
             raise ValueError(f"registration through the surface needs register_heights 0 (off) or >= 2, got {self.register_heights}")
+        if not self.max_texels_per_pixel > 0 or (self.fit_size is not None and self.fit_size < 1):
+            raise ValueError(f"max_texels_per_pixel must be positive and fit_size None or >= 1, got "
+                             f"{self.max_texels_per_pixel} and {self.fit_size}")
         if self.search_steps < 1 or self.search_final_steps < 0:
             raise ValueError(f"the metal search needs search_steps >= 1 and search_final_steps >= 0, "
                              f"got {self.search_steps} and {self.search_final_steps}")
@@ -149,6 +158,8 @@ class TextureFitReport:
     # The registration through the surface's height map (S, S) over the atlas, field units (None: not
     # that registration): the export moves its surface by it (surface_heights.displaced).
     surface_heights: np.ndarray | None = None
+    fit_size: int | None = None  # the size the textures were fitted at, when below the export's (fit_resolution.py)
+    texels_per_pixel: float | None = None  # a photo pixel's median side in texels of the export's textures
 
     def summary(self) -> str:
         text = (f"textures fitted to {self.views} photos ({self.pixels} pixels, {self.steps} steps, {self.seconds:.1f} s): "
@@ -160,6 +171,9 @@ class TextureFitReport:
             text += f"; photos registered (mean shift {self.registration_shift:.2f} px)"
         if self.surface_heights is not None:
             text += f"; surface moved by {float(np.abs(self.surface_heights).mean()):.4f} on average"
+        if self.fit_size is not None:
+            text += (f"; fitted at {self.fit_size} px, the photos' resolution (a photo pixel spans "
+                     f"{self.texels_per_pixel:.1f} texels of the export's)")
         return text
 
 
@@ -532,4 +546,12 @@ def fit_textures_to_photos(uv_mesh: UVMesh, textures: BakedTextures, photos: Pho
     samples = sample_photo_pixels(mesh_for_rendering(uv_mesh, textures), photos, context, config.min_photo_alpha,
                                   config.footprint, with_sources=config.register_grid > 0 or config.register_heights > 0)
     samples = samples.subset(config.max_pixels, config.seed)
-    return fit_textures(textures, samples, lighting, config, progress, should_stop, views=len(photos.cameras))
+    size = textures.covered.shape[0]
+    fit_size = fit_size_for(samples.uv, samples.footprint, size, config.max_texels_per_pixel, config.fit_size)
+    if fit_size == size:
+        return fit_textures(textures, samples, lighting, config, progress, should_stop, views=len(photos.cameras))
+    coarse = averaged_down(textures, fit_size)
+    fitted, report = fit_textures(coarse, samples, lighting, config, progress, should_stop, views=len(photos.cameras))
+    report.fit_size = fit_size
+    report.texels_per_pixel = texels_per_photo_pixel(samples.uv, samples.footprint, size)
+    return carried_up(textures, coarse, fitted, config.dilation), report
