@@ -21,6 +21,9 @@ keep the field's values. On the held-out synthetic set it raised the relighting 
 That prior also keeps metal the field left as paint from being found by the gradient (a local
 minimum: metal_search.py), so by default each texel's material is first chosen among three fits
 (the field's metallic, metallic held at 0, held at 1) and the joint fit starts from the choice.
+
+An export's texture much finer than its photos is fitted at the photos' resolution and the change
+carried back up (fit_resolution.py): texel for texel, a photo pixel's few sub-samples leave a speckle.
 """
 
 from __future__ import annotations
