@@ -17,7 +17,9 @@ def add_parser(subparsers) -> None:
     parser.add_argument("-o", "--out", type=Path, help="the .glb (or .usdz, for Apple's AR Quick Look) to write (default "
                         "CAPTURE/export/asset.glb, as the app; replaced only by a complete file)")
     parser.add_argument("--faces", type=int, default=20_000, help="face budget after decimation (default 20000)")
-    parser.add_argument("--texture", type=int, default=1024, help="texture side in pixels, 64..4096 (default 1024)")
+    parser.add_argument("--texture", type=int, default=1024,
+                        help="texture side in pixels, 64..4096 (default 1024; where it is finer than the photos, the fit "
+                             "to them runs at their resolution and its change is carried up)")
     parser.add_argument("--grid", type=int, default=256, help="marching-cubes grid per side (default 256)")
     parser.add_argument("--checkpoint", type=Path, help="the weights the reconstruction was made with (default: as lirm reconstruct)")
     parser.add_argument("--no-normal-map", action="store_true", help="leave out the tangent-space normal map")
