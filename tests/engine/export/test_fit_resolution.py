@@ -79,52 +79,19 @@ def test_an_export_far_finer_than_its_photos_is_fitted_better_at_the_photos_reso
     renderer from the photos' cameras, is closer to the checker than fitted texel for texel at 512."""
     from dataclasses import replace
 
-    from lirm.engine.assets.model_loader import load_model
     from lirm.engine.export.export_asset import ExportConfig, export_field
-    from lirm.engine.export.field_mesh import MeshExtractionConfig
-    from lirm.engine.export.photo_texture_fit import PhotoViews, TextureFitConfig, mesh_for_rendering
-    from lirm.engine.lighting.panorama_lighting import PanoramaLighting
+    from lirm.engine.export.photo_texture_fit import TextureFitConfig
     from lirm.engine.model.analytic_fields import SphereField
-    from lirm.renderer.pbr_renderer import RenderSettings
-    from lirm.renderer.procedural_environments import make_procedural_environment
 
-    from .test_photo_texture_fit import CHECKER, GREY, _cameras
+    from .test_photo_texture_fit import GREY, SMALL, checker_sphere_photos, exported_albedo_error
 
-    lighting = PanoramaLighting.from_environment(make_procedural_environment("sky", width=128), height=16)
-    environment = lighting.environment("sky 16 x 32")
-    cameras = _cameras()
-    mesh = MeshExtractionConfig(resolution=48, face_budget=3000)
-    truth = export_field(SphereField(0.5, pattern=CHECKER), tmp_path / "truth.glb", ExportConfig(mesh=mesh, texture_size=128),
-                         context=gl_context)
-    scene = renderer.upload([mesh_for_rendering(truth.uv_mesh, truth.textures)])
-    lit = renderer.prepare_lighting(environment)
-    try:
-        shots = [renderer.render_view(scene, c, lit, RenderSettings(show_environment=False)) for c in cameras]
-    finally:
-        scene.release()
-        lit.maps.release()
-    photos = PhotoViews(cameras, np.stack([s.beauty for s in shots]), np.stack([s.mask for s in shots]))
-
+    shoot = checker_sphere_photos(tmp_path, gl_context, renderer)
     def fitted(name: str, fit_size: int | None):
-        config = ExportConfig(mesh=mesh, texture_size=512,
+        config = ExportConfig(mesh=SMALL.mesh, texture_size=512,
                               texture_fit=replace(TextureFitConfig(), fit_size=fit_size, register_heights=0, metal_search=False,
                                                                    steps=150))
         return export_field(SphereField(0.5, pattern=GREY), tmp_path / f"{name}.glb", config, context=gl_context,
-                            photos=photos, lighting=lighting)
-
-    def albedo_error(result) -> float:
-        scene = renderer.upload(load_model(result.path).meshes)
-        lit = renderer.prepare_lighting(environment)
-        try:
-            errors = []
-            for camera, shot in zip(cameras, shots):
-                out = renderer.render_view(scene, camera, lit, RenderSettings(show_environment=False))
-                inside = (out.mask > 0.999) & (shot.mask > 0.999)
-                errors.append(np.abs(out.albedo[inside] - shot.albedo[inside]).mean())
-        finally:
-            scene.release()
-            lit.maps.release()
-        return float(np.mean(errors))
+                            photos=shoot.photos, lighting=shoot.lighting)
 
     chosen, texel_for_texel = fitted("chosen", None), fitted("full", 512)
     report = chosen.texture_fit
@@ -132,5 +99,6 @@ def test_an_export_far_finer_than_its_photos_is_fitted_better_at_the_photos_reso
     assert "fitted at" in report.summary()
     assert texel_for_texel.texture_fit.fit_size is None  # fitted at the export's own size
     assert chosen.textures.base_color.shape == (512, 512, 3)  # the export keeps its size
-    errors = albedo_error(chosen), albedo_error(texel_for_texel)
+    errors = tuple(exported_albedo_error(renderer, r.path, shoot.environment, shoot.cameras, shoot.shots)
+                   for r in (chosen, texel_for_texel))
     assert errors[0] < 0.5 * errors[1], errors  # (0.022 against 0.111 when written)

@@ -130,9 +130,11 @@ def test_the_metal_search_finds_metal_that_the_field_left_as_paint():
     np.testing.assert_allclose(one.metallic, full.metallic, atol=0.02)  # (float rounding, through Adam)
 
 
-def test_an_export_fitted_to_photos_of_a_checker_sphere_shows_the_checker(tmp_path, gl_context, renderer):
-    """Photos of a checker sphere rendered by the renderer under an environment; a grey sphere's export,
-    fitted to them under that environment, comes out close to the checker's albedo."""
+def checker_sphere_photos(tmp_path, gl_context, renderer):
+    """Photos (64 px, 8 views) of a checker sphere's export rendered under a 16 x 32 sky: the lighting,
+    its environment, the cameras, the renders (`shots`, with their G-buffers) and the PhotoViews."""
+    from types import SimpleNamespace
+
     lighting = PanoramaLighting.from_environment(make_procedural_environment("sky", width=128), height=16)
     environment = lighting.environment("sky 16 x 32")
     cameras = _cameras()
@@ -145,6 +147,14 @@ def test_an_export_fitted_to_photos_of_a_checker_sphere_shows_the_checker(tmp_pa
         scene.release()
         lit.maps.release()
     photos = PhotoViews(cameras, np.stack([s.beauty for s in shots]), np.stack([s.mask for s in shots]))
+    return SimpleNamespace(lighting=lighting, environment=environment, cameras=cameras, shots=shots, photos=photos)
+
+
+def test_an_export_fitted_to_photos_of_a_checker_sphere_shows_the_checker(tmp_path, gl_context, renderer):
+    """Photos of a checker sphere rendered by the renderer under an environment; a grey sphere's export,
+    fitted to them under that environment, comes out close to the checker's albedo."""
+    shoot = checker_sphere_photos(tmp_path, gl_context, renderer)
+    lighting, environment, cameras, shots, photos = shoot.lighting, shoot.environment, shoot.cameras, shoot.shots, shoot.photos
 
     baked = export_field(SphereField(0.5, pattern=GREY), tmp_path / "baked.glb", SMALL, context=gl_context)
     assert baked.texture_fit is None  # no photos, no fit
@@ -155,25 +165,27 @@ def test_an_export_fitted_to_photos_of_a_checker_sphere_shows_the_checker(tmp_pa
     assert report.loss_after < 0.3 * report.loss_before, report.summary()
     assert "texture_fit" in fitted.seconds
 
-    def albedo_error(result) -> float:
-        """The export's albedo against the checker's, seen from the photos' cameras (the G-buffer)."""
-        from lirm.engine.assets.model_loader import load_model
-
-        scene = renderer.upload(load_model(result.path).meshes)
-        lit = renderer.prepare_lighting(environment)
-        try:
-            errors = []
-            for camera, shot in zip(cameras, shots):
-                out = renderer.render_view(scene, camera, lit, RenderSettings(show_environment=False))
-                inside = (out.mask > 0.999) & (shot.mask > 0.999)
-                errors.append(np.abs(out.albedo[inside] - shot.albedo[inside]).mean())
-        finally:
-            scene.release()
-            lit.maps.release()
-        return float(np.mean(errors))
-
-    before, after = albedo_error(baked), albedo_error(fitted)
+    before, after = (exported_albedo_error(renderer, r.path, environment, cameras, shots) for r in (baked, fitted))
     assert after < 0.35 * before, (before, after)
+
+
+def exported_albedo_error(renderer, path, environment, cameras, shots) -> float:
+    """An exported .glb's albedo against the photos' true albedo (`shots`: the photos' renders), seen
+    from the photos' cameras through the renderer's G-buffer."""
+    from lirm.engine.assets.model_loader import load_model
+
+    scene = renderer.upload(load_model(path).meshes)
+    lit = renderer.prepare_lighting(environment)
+    try:
+        errors = []
+        for camera, shot in zip(cameras, shots):
+            out = renderer.render_view(scene, camera, lit, RenderSettings(show_environment=False))
+            inside = (out.mask > 0.999) & (shot.mask > 0.999)
+            errors.append(np.abs(out.albedo[inside] - shot.albedo[inside]).mean())
+    finally:
+        scene.release()
+        lit.maps.release()
+    return float(np.mean(errors))
 
 
 def test_a_clipped_photo_pixel_is_only_a_lower_bound():
