@@ -40,22 +40,21 @@ def texels_per_photo_pixel(uv: torch.Tensor, footprint: int, size: int) -> float
     return float(side.median())
 
 
-def fit_size_for(uv: torch.Tensor, footprint: int, size: int, max_texels_per_pixel: float,
-                 fixed: int | None = None) -> int:
-    """The size to fit a `size` texture at: `fixed` when given (at most `size`, and only a power-of-two
-    division of it), else the largest halving of `size` (down to MIN_FIT_SIZE) at which a photo pixel
-    spans at most `max_texels_per_pixel` texels. `size` itself when it cannot be halved evenly or the
-    photos' pixels cannot be measured (one sub-sample a pixel)."""
+def fit_size_for(texels_per_pixel: float, size: int, max_texels_per_pixel: float, fixed: int | None = None) -> int:
+    """The size to fit a `size` texture at, whose photo pixels span `texels_per_pixel` texels of it
+    (texels_per_photo_pixel): `fixed` when given (at most `size`, and only a power-of-two division of
+    it), else the largest halving of `size` (down to MIN_FIT_SIZE) at which a photo pixel spans at most
+    `max_texels_per_pixel` texels. `size` itself when it cannot be halved evenly or the photos' pixels
+    could not be measured (NaN: one sub-sample a pixel)."""
     candidates = [size]
     while candidates[-1] % 2 == 0 and candidates[-1] // 2 >= MIN_FIT_SIZE:
         candidates.append(candidates[-1] // 2)
     if fixed is not None:
         return fixed if fixed in candidates else size
-    per_texel = texels_per_photo_pixel(uv, footprint, size) / size
-    if not np.isfinite(per_texel) or per_texel <= 0:
+    if not np.isfinite(texels_per_pixel) or texels_per_pixel <= 0:
         return size
     for candidate in candidates:
-        if per_texel * candidate <= max_texels_per_pixel:
+        if texels_per_pixel * candidate / size <= max_texels_per_pixel:
             return candidate
     return candidates[-1]
 

@@ -550,11 +550,11 @@ def fit_textures_to_photos(uv_mesh: UVMesh, textures: BakedTextures, photos: Pho
                                   config.footprint, with_sources=config.register_grid > 0 or config.register_heights > 0)
     samples = samples.subset(config.max_pixels, config.seed)
     size = textures.covered.shape[0]
-    fit_size = fit_size_for(samples.uv, samples.footprint, size, config.max_texels_per_pixel, config.fit_size)
+    texels_per_pixel = texels_per_photo_pixel(samples.uv, samples.footprint, size)
+    fit_size = fit_size_for(texels_per_pixel, size, config.max_texels_per_pixel, config.fit_size)
     if fit_size == size:
         return fit_textures(textures, samples, lighting, config, progress, should_stop, views=len(photos.cameras))
     coarse = averaged_down(textures, fit_size)
     fitted, report = fit_textures(coarse, samples, lighting, config, progress, should_stop, views=len(photos.cameras))
-    report.fit_size = fit_size
-    report.texels_per_pixel = texels_per_photo_pixel(samples.uv, samples.footprint, size)
+    report.fit_size, report.texels_per_pixel = fit_size, texels_per_pixel
     return carried_up(textures, coarse, fitted, config.dilation), report

@@ -28,15 +28,15 @@ def test_a_photo_pixels_side_is_measured_in_texels_from_its_sub_samples():
 
 
 def test_the_fit_size_is_the_largest_halving_at_which_a_pixel_spans_few_texels():
-    uv = _pixel_grid(50, 8.0 / 1024)  # 8 texels a pixel at 1024, 2 at 256, 4 at 512
-    assert fit_size_for(uv, 4, 1024, 2.5) == 256
-    assert fit_size_for(uv, 4, 1024, 4.5) == 512
-    assert fit_size_for(uv, 4, 1024, 10.0) == 1024  # the photos as fine as the texture: fitted as it is
-    assert fit_size_for(uv, 4, 1024, 0.01) == 64  # never below 64
-    assert fit_size_for(uv, 4, 1024, 2.5, fixed=512) == 512
-    assert fit_size_for(uv, 4, 1024, 2.5, fixed=300) == 1024  # not a halving: the texture's own size
-    assert fit_size_for(uv, 4, 1000, 2.5) == 250  # halved while it divides evenly
-    assert fit_size_for(uv, 1, 1024, 2.5) == 1024  # one sub-sample a pixel: not measured, not changed
+    side = texels_per_photo_pixel(_pixel_grid(50, 8.0 / 1024), 4, 1024)  # 8 texels a pixel at 1024, 2 at 256, 4 at 512
+    assert fit_size_for(side, 1024, 2.5) == 256
+    assert fit_size_for(side, 1024, 4.5) == 512
+    assert fit_size_for(side, 1024, 10.0) == 1024  # the photos as fine as the texture: fitted as it is
+    assert fit_size_for(side, 1024, 0.01) == 64  # never below 64
+    assert fit_size_for(side, 1024, 2.5, fixed=512) == 512
+    assert fit_size_for(side, 1024, 2.5, fixed=300) == 1024  # not a halving: the texture's own size
+    assert fit_size_for(side * 1000 / 1024, 1000, 2.5) == 250  # halved while it divides evenly
+    assert fit_size_for(float("nan"), 1024, 2.5) == 1024  # one sub-sample a pixel: not measured, not changed
 
 
 def _textures(size: int, seed: int = 0) -> BakedTextures:
