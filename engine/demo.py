@@ -154,7 +154,8 @@ def _reconstruct_and_export(capture_dir: Path, asset_path: Path, config: DemoCon
         from .refine.config import refine_preset
 
         what = " with the materials under the photos' lighting" if config.refine_materials else ""
-        say(f"refining the reconstruction on all the views for {config.refine_minutes:g} minutes{what}")
+        minutes = f"{config.refine_minutes:g} minute{'' if config.refine_minutes == 1 else 's'}"
+        say(f"refining the reconstruction on all the views for {minutes}{what}")
         refine = refine_preset("default", minutes=config.refine_minutes, inverse_rendering=config.refine_materials)
         refined = run_refine(capture_dir, source, refine, render=pictures)
         say(f"refinement: {refined.steps} steps in {refined.seconds:.0f} s from {refined.started_from}")

@@ -7,23 +7,30 @@ import sys
 from pathlib import Path
 
 from .. import progress_events
+from ..errors import LirmUsageError
 
 
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser("demo", help="run the main job on built-in data: render, photograph and capture a built-in object")
     parser.add_argument("-o", "--out", type=Path, default=Path("demo_output"), help="output folder (default: ./demo_output)")
     parser.add_argument("--capture-only", action="store_true", help="stop once the capture is made (no reconstruction or export)")
+    parser.add_argument("--refine-minutes", type=float, metavar="M",
+                        help="per-scene refinement before the export, in minutes (default: the demo's 3; fewer gives a "
+                             "quicker, rougher asset; 0 exports the feed-forward LIRM state as is)")
     parser.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..demo import run_demo
-
     from dataclasses import replace
 
-    from ..demo import DemoConfig
+    from ..demo import DemoConfig, run_demo
 
     config = replace(DemoConfig(), capture_only=args.capture_only)
+    if args.refine_minutes is not None:
+        if not args.refine_minutes >= 0:
+            raise LirmUsageError(f"--refine-minutes must be 0 or more, got {args.refine_minutes:g}")
+        config = replace(config, refine_minutes=args.refine_minutes or None)
+
     def say(message: str) -> None:
         progress_events.emit(message, 0, 0)
         print(message, file=sys.stderr)

@@ -166,8 +166,11 @@ def test_bench_render_reports_positive_rates(tmp_path, capsys):
 @pytest.mark.slow
 def test_demo_photographs_and_captures_a_builtin_object(tmp_path):
     """`make demo`'s command: renders a built-in object as photos, runs the capture pipeline on them
-    and reports pose and mask accuracy against the truth (issue 3's acceptance figures)."""
-    proc = subprocess.run([str(Path(sys.executable).parent / "lirm"), "demo", "-o", str(tmp_path / "demo")],
+    and reports pose and mask accuracy against the truth (issue 3's acceptance figures).
+    With a 1-minute refinement instead of the default 3: the same flow end to end, two minutes
+    sooner (the suite's time); the relit asset's checks below hold there too (worst side 0.92 of
+    the original's brightness at 1 minute, 0.95 at 3)."""
+    proc = subprocess.run([str(Path(sys.executable).parent / "lirm"), "demo", "-o", str(tmp_path / "demo"), "--refine-minutes", "1"],
                           capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr
     out = proc.stdout
@@ -212,7 +215,7 @@ def test_demo_photographs_and_captures_a_builtin_object(tmp_path):
     # relit, no side of the asset is much darker than the original's (a plain radiance fit's label side,
     # in the sky's shadow in the photos, came out at 0.38-0.47 of the original's brightness; with the
     # materials 0.95-1.39).
-    assert "with the materials under the photos' lighting" in proc.stderr
+    assert "for 1 minute with the materials under the photos' lighting" in proc.stderr
     assert min(_relit_brightness_ratios(relit)) > 0.7, _relit_brightness_ratios(relit)
     # The mug stands on the set's floor: the capture found it as the support plane, and the lighting
     # estimate placed the floor's pixels on it (capture_lighting.py), where the mug sees it.

@@ -93,6 +93,12 @@ def test_eval_and_bench_sizes_out_of_range(capsys):
     assert code == 2 and "--size must be between" in one_sentence(err) and "lirm bench trajectory --help" in err
 
 
+def test_demo_refinement_minutes_below_zero(capsys, tmp_path):
+    code, err = run(capsys, "demo", "-o", str(tmp_path / "demo"), "--refine-minutes", "-1")
+    assert code == 2 and "--refine-minutes must be 0 or more" in one_sentence(err)
+    assert not (tmp_path / "demo").exists()  # refused before any work
+
+
 # ---- 3: bad input ---------------------------------------------------------------------------------
 
 def test_capture_output_in_an_unwritable_place(capsys, photos):
