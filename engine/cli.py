@@ -13,12 +13,12 @@ from pathlib import Path
 from lirm.renderer.context import GLContextError
 
 from . import progress_events
-from .commands import app, bench, capture, demo, export, reconstruct, refine, render, ship, suggest, train
+from .commands import app, bench, capture, curve, demo, export, reconstruct, refine, render, ship, suggest, train
 from .commands import eval as eval_
 from .errors import LirmResourceError, LirmUsageError, LirmUserError
 
 # The commands in the order `lirm --help` lists them; each is a module of engine/commands/.
-COMMANDS = (app, demo, render, capture, reconstruct, refine, export, suggest, train, eval_, ship, bench)
+COMMANDS = (app, demo, render, capture, reconstruct, refine, export, suggest, train, curve, eval_, ship, bench)
 
 # Exit codes (README "Exit codes"): what went wrong, for scripts and for the app's background jobs.
 EXIT_OK = 0  # done

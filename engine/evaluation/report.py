@@ -38,10 +38,13 @@ def relighting_section(results: list[tuple[str, EvalResult]]) -> list[str]:
     rows = [(name, r) for name, result in results for r in result.rows if r.relight_psnr_l is not None]
     if not rows:
         return []
-    lines = ["", "Relighting test:", "", "| reconstructor | after update | PSNR-H ↑ | PSNR-L ↑ | SSIM ↑ | LPIPS ↓ |", "|---|---|---|---|---|---|"]
+    named = any(name for name, _ in rows)  # one model's own table has no reconstructor column
+    lines = ["", "Relighting test:", ""]
+    lines += (["| reconstructor | after update | PSNR-H ↑ | PSNR-L ↑ | SSIM ↑ | LPIPS ↓ |", "|---|---|---|---|---|---|"] if named
+              else ["| after update | PSNR-H ↑ | PSNR-L ↑ | SSIM ↑ | LPIPS ↓ |", "|---|---|---|---|---|"])
     for name, r in rows:
-        lines.append(f"| {name} | {r.update} | {_fmt(r.relight_psnr_h, 2)} | {_fmt(r.relight_psnr_l, 2)} | "
-                     f"{_fmt(r.relight_ssim, 3)} | {_fmt(r.relight_lpips, 3)} |")
+        lines.append((f"| {name} " if named else "") + f"| {r.update} | {_fmt(r.relight_psnr_h, 2)} | "
+                     f"{_fmt(r.relight_psnr_l, 2)} | {_fmt(r.relight_ssim, 3)} | {_fmt(r.relight_lpips, 3)} |")
     lines += ["", RELIGHT_NOTES, "", "Lighting per object:"]
     lighting = results[0][1].lighting
     lines += [f"- {obj}: {text}" for obj, text in lighting.items()]

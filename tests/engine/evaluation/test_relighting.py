@@ -119,6 +119,9 @@ def test_eval_reports_the_relighting_and_what_lit_and_relit_each_object(tmp_path
                  "-o", str(tmp_path / "eval.md")]) == 0
     table = capsys.readouterr().out
     assert "Relighting test:" in table and "| PSNR-H ↑ | PSNR-L ↑ |" in table
+    relight = table.split("Relighting test:")[1].strip().split("\n\n")[0].splitlines()
+    assert len(relight) >= 3 and all(line.count("|") == relight[0].count("|") for line in relight), relight
+    assert all("|  |" not in line for line in relight), relight  # no empty reconstructor cell
     assert "- vase#0: lit by studio (rotated" in table and "relit by sky (rotated" in table
     import json
 

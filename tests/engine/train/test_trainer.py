@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 from safetensors.torch import load_file, save_file
 
 from lirm.engine.errors import LirmUserError
@@ -59,6 +60,18 @@ def test_tiny_training_loss_falls(tmp_path, cache):
     # The final checkpoint is an ordinary model checkpoint too.
     model, extra = load_checkpoint(tmp_path / "run" / "last.safetensors")
     assert model.config.name == "tiny" and extra["training"]["step"] == 40
+
+
+def test_checkpointing_trains_the_same_steps_with_less_memory(tmp_path, cache):
+    """`--checkpointing on` recomputes the transformer and the crops' renders in the backward pass: the
+    same losses and weights as off (which the H200 slices use for speed), only the memory differs."""
+    plain = run_training(_config(tmp_path / "off", cache, max_steps=2, checkpointing="off"))
+    recomputed = run_training(_config(tmp_path / "on", cache, max_steps=2, checkpointing="on"))
+    np.testing.assert_allclose([r["loss"] for r in recomputed.history], [r["loss"] for r in plain.history], rtol=1e-5)
+    assert TrainConfig().uses_checkpointing(torch.device("cpu")) is False  # auto: only on GPUs
+    assert TrainConfig().uses_checkpointing(torch.device("cuda")) is True
+    with pytest.raises(LirmUserError, match="choose auto, on or off"):
+        TrainConfig(checkpointing="sometimes").uses_checkpointing(torch.device("cpu"))
 
 
 def test_resume_continues_the_exact_loss_curve(tmp_path, cache):
