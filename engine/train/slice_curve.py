@@ -51,6 +51,8 @@ def read_slices(logs_dir: Path) -> tuple[list[dict], list[dict]]:
             metrics[int(row["step"])] = {**row, "slice": folder.name.split("-")[0]}
         for row in _rows(folder / "eval.csv"):
             evals[(int(row["step"]), int(row["update"]))] = row
+    if not metrics:
+        raise LirmUserError(f"{logs_dir}: the slices' metrics.csv files hold no steps yet")
     return [metrics[s] for s in sorted(metrics)], [evals[k] for k in sorted(evals)]
 
 

@@ -54,3 +54,6 @@ def test_curve_of_the_repository_logs(tmp_path, capsys):
 def test_a_folder_without_slices_is_refused(tmp_path, capsys):
     assert main(["curve", str(tmp_path)]) != 0
     assert "no slice folders with a metrics.csv" in capsys.readouterr().err
+    _slice(tmp_path / "slice05-started", range(0), 1.0)  # a slice stopped before its first step
+    assert main(["curve", str(tmp_path)]) != 0
+    assert "hold no steps yet" in capsys.readouterr().err
