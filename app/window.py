@@ -217,9 +217,13 @@ class LirmApp:
             self._exit_asked = False
         self.exit_dialog_open = imgui.is_popup_open("Work under way")
         if imgui.begin_popup_modal("Work under way", None, imgui.WindowFlags_.always_auto_resize)[0]:
-            for job in self.jobs.running():
+            running = self.jobs.running()
+            for job in running:
                 imgui.text(f"{job.title}: {job.stage}")
-            imgui.text("Exports finish in the background if you quit now; other work is cancelled.")
+            if running:
+                imgui.text("Exports finish in the background if you quit now; other work is cancelled.")
+            else:  # it ended while the question was up
+                imgui.text("The work has finished: nothing is lost if you quit now.")
             if imgui.button("Keep working"):
                 imgui.close_current_popup()
             imgui.same_line()

@@ -58,16 +58,21 @@ if [ "$checkpointing" = auto ] && [ "$device" = cuda ]; then
   memory=$(nvidia-smi --query-gpu=memory.total --format=csv,noheader,nounits | head -1)
   [ "${memory:-0}" -ge 130000 ] && checkpointing=off
 fi
-echo "gradient checkpointing: $checkpointing"
+# Loader processes: one makes 15.7-18.4 views of 256² a second on the H200's EGL (third slice), so a step's
+# 16 scenes x 12 views take 8 processes about 1.5 s: enough for the 2.9 s step with checkpointing, not
+# for the 1.3 s step without it, so 12 then (16 cores: the step's own process keeps one free).
+if [ "$checkpointing" = off ]; then workers=${WORKERS:-12}; else workers=${WORKERS:-8}; fi
+echo "gradient checkpointing: $checkpointing, $workers loader processes"
 resume=()
-# 12 views rendered per scene (stage 1's two update sets of up to 6; the trainer's default is 32) and 8
-# loader processes: the second slice's 14 processes rendering 32 views each kept the 16 cores busy while
-# the step's own process, which launches the GPU's kernels, needed one (3.37 s per step in training, 1.73 s
-# in `lirm bench train` on the same GPU with the data made beforehand). SCENE_VIEWS=32 gives the old data.
+# 12 views rendered per scene (stage 1's two update sets of up to 6; the trainer's default is 32) by
+# one-thread loaders: the second slice's 14 processes rendering 32 views each with OpenCV's threads kept the
+# 16 cores busy while the step's own process, which launches the GPU's kernels, needed one (3.37 s per step
+# in training, 1.73 s in `lirm bench train` on the same GPU with the data made beforehand). SCENE_VIEWS=32
+# gives the old data.
 views=(--scene-views "${SCENE_VIEWS:-12}")
 [ -f resources/checkpoints/lirm-small-resume.safetensors ] && resume=(--resume resources/checkpoints/lirm-small-resume.safetensors)
 $lirm train --preset "${PRESET:-small}" --stage 1 --stage-steps "${STAGE_STEPS:-3000}" --batch-scenes "${BATCH_SCENES:-16}" \
-  --workers "${WORKERS:-8}" --device $device --out "$work/run" --checkpoint-every "${CHECKPOINT_EVERY:-100}" \
+  --workers "$workers" --device $device --out "$work/run" --checkpoint-every "${CHECKPOINT_EVERY:-100}" \
   --eval-every "${EVAL_EVERY:-100}" --eval-objects 2 --slim-copy "$work/slim.safetensors" --checkpointing "$checkpointing" "${resume[@]}" "${views[@]}" &
 pid=$!
 # The deadline is kept whatever the trainer is doing: a first SIGINT (to the trainer alone) stops at
