@@ -15,6 +15,9 @@ t0=$(date +%s)
 left() { echo $((budget - ($(date +%s) - t0))); }
 OUT=${OUT:-/tmp/out}
 work=${SLICE_WORK:-/tmp/slice}  # the run, its logs and the slim copy before they are packed into $OUT
+# Emptied first: a second call on a still-warm machine finds the first call's folder, and its run's metrics,
+# log and bench would be packed again with its own (the fourth slice's were).
+rm -rf "$work"
 mkdir -p "$OUT" "$work"
 log="$work/log.txt"
 exec > >(tee -a "$log") 2>&1

@@ -27,6 +27,10 @@ def test_a_slice_dry_run_resumes_trains_and_brings_back_weights_that_resume_late
     out, work = tmp_path / "out", tmp_path / "work"
     env = dict(os.environ, DEVICE="cpu", OUT=str(out), SLICE_WORK=str(work), BATCH_SCENES="1", WORKERS="1", SYNTH_SCENES="1",
                PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}")
+    # What an earlier call on the same machine left behind must not come back with this one's logs.
+    (work / "run").mkdir(parents=True)
+    (work / "run" / "metrics.csv").write_text("step,loss\n99999,1.0\n")
+    (work / "bench_train.json").write_text("{}")
     # Output to a file, not a pipe: the script's deadline watchdog may outlive it by a few seconds.
     with open(tmp_path / "slice.log", "w") as log:
         # 165 s: the first SIGINT 75 s before the end, after about 80 s of training (the first step
@@ -49,3 +53,7 @@ def test_a_slice_dry_run_resumes_trains_and_brings_back_weights_that_resume_late
     with tarfile.open(out / "logs.tar.gz") as logs:
         names = {Path(n).name for n in logs.getnames()}
     assert {"log.txt", "metrics.csv", "stage1_run.json"} <= names, names
+    assert "bench_train.json" not in names  # the earlier call's, not this one's (TRAIN_BENCH was not set)
+    with tarfile.open(out / "logs.tar.gz") as logs:
+        member = next(m for m in logs.getmembers() if Path(m.name).name == "metrics.csv")
+        assert "99999," not in logs.extractfile(member).read().decode()
