@@ -19,7 +19,11 @@ COLOURS = [(200, 80, 30), (40, 140, 40), (30, 60, 200), (150, 40, 150), (20, 150
 
 def read_metrics(path: Path) -> dict[str, np.ndarray]:
     with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
+        return metrics_arrays(list(csv.DictReader(f)))
+
+
+def metrics_arrays(rows: list[dict]) -> dict[str, np.ndarray]:
+    """metrics.csv rows as one float array per numeric column (empty cells NaN; text columns left out)."""
     if not rows:
         return {}
     out = {}

@@ -14,7 +14,7 @@ import numpy as np
 from lirm.engine.errors import LirmUserError
 from lirm.engine.io.images import write_png
 
-from .loss_curve import draw_loss_curves
+from .loss_curve import draw_loss_curves, metrics_arrays
 
 
 @dataclass
@@ -89,9 +89,5 @@ def markdown_curve(blocks: list[CurveBlock]) -> str:
 
 
 def write_curve_picture(metrics: list[dict], out_png: Path, title: str) -> Path:
-    columns = ["loss", "colour", "albedo", "normal"]
-    arrays = {"step": np.array([float(r["step"]) for r in metrics])}
-    for c in columns:
-        arrays[c] = np.array([float(r[c]) if r.get(c) not in ("", None) else np.nan for r in metrics])
-    write_png(out_png, draw_loss_curves(arrays, columns, title=title))
+    write_png(out_png, draw_loss_curves(metrics_arrays(metrics), ["loss", "colour", "albedo", "normal"], title=title))
     return out_png

@@ -267,7 +267,7 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
     model = model.to(device)
     cuda = device.type == "cuda"
     checkpointing = config.uses_checkpointing(device)
-    model.transformer.gradient_checkpointing = checkpointing  # memory for batch on GPUs; a CPU run is small anyway
+    model.transformer.gradient_checkpointing = checkpointing
     optimizer = training_optimizer(model, stage.learning_rate[0])
     if start_step > 0 and not moments_dropped:  # continuing: the moments must be there (restore_optimizer says so if not)
         restore_optimizer(optimizer, model, optimizer_state, config.resume)

@@ -5,11 +5,11 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
 from lirm.engine.cli import main
-import cv2
 from lirm.engine.train.slice_curve import curve_blocks, read_slices
 
 REPO_LOGS = Path(__file__).resolve().parents[3] / "resources" / "checkpoints" / "training-logs" / "small"
