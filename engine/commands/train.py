@@ -35,6 +35,8 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--batch-scenes", type=int, help="scenes per step over all processes (default: the stage's)")
     parser.add_argument("--slim-copy", type=Path, help="at the end, also write the weights as float16 with the step but no "
                         "AdamW moments (a third of the size; --resume from it continues the step with fresh moments)")
+    parser.add_argument("--slim-only", action="store_true", help="save only the --slim-copy (every --checkpoint-every steps "
+                        "and at the end), no full checkpoints with AdamW moments: for a machine whose disk is lost after the run")
     parser.add_argument("--checkpointing", default="auto", choices=["auto", "on", "off"],
                         help="gradient checkpointing of the transformer and of the crops' renders (default auto: on GPUs); "
                         "off is faster where the memory allows (a `small` step of 16 scenes: 115 GiB)")
@@ -62,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
                          checkpoint_every=args.checkpoint_every, eval_every=args.eval_every,
                          eval_objects=args.eval_objects, workers=args.workers, device=args.device,
                          batch_scenes=args.batch_scenes, slim_copy=str(args.slim_copy) if args.slim_copy else None,
-                         checkpointing=args.checkpointing)
+                         checkpointing=args.checkpointing, full_checkpoints=not args.slim_only)
     stage = config.stage_settings()
     if rank0:
         print(f"stage {args.stage} of '{args.preset}': {stage.steps} steps, lr {stage.learning_rate[0]:g} -> {stage.learning_rate[1]:g}, "

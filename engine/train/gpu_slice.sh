@@ -3,9 +3,10 @@
 #
 # Prepare here once: ../shared/tools/gpu-machine-prep.sh (wheels in .whl/, GL loaders in .gl/); then call
 # the device tool with carry [".whl", ".gl"] and the command `bash engine/train/gpu_slice.sh SECONDS`,
-# where SECONDS is the wall time this script may use (it must end inside the call's limit).
+# where SECONDS is the wall time this script may use (it must end inside the call's limit: 575 in a 590 s
+# call; a second call on the still-warm machine gets what is left, e.g. 240 in a 250 s call).
 # It installs the project, checks EGL, with TIMINGS=1 times the update loop (paper at 512 and 256 px,
-# small; bf16), measures the data generator, then trains `small` stage 1 until its deadline, resuming from
+# small; bf16), with SYNTH_BENCH=1 measures the data generator, then trains `small` stage 1 until its deadline, resuming from
 # resources/checkpoints/lirm-small-resume.safetensors when that exists. What comes back in $OUT:
 # the float16 resume copy split in 15 MiB parts (slim.part*; `cat slim.part* > F` joins them) and
 # logs.tar.gz (metrics.csv, eval.csv, run json, loss curves, timings, the log).
@@ -49,9 +50,12 @@ if [ "${TRAIN_BENCH:-0}" = 1 ]; then
   timeout ${T_TRAIN_BENCH:-150} $lirm bench train --preset small --device $device --batch-scenes "${BATCH_SCENES:-16}" \
     --checkpointing both --steps 2 --profile --json "$work/bench_train.json" 2>&1 | grep -v USDT
 fi
-# One process's synthetic-scene rate on this machine's EGL (the training runs many such processes;
-# SYNTH_SCENES=1 in the CPU dry run, where 6 took 31 s of its 128).
-timeout ${T_BENCH:-45} $lirm bench synth --scenes "${SYNTH_SCENES:-6}" --views 8 --size 256
+# One process's synthetic-scene rate on this machine's EGL (the training runs many such processes):
+# only with SYNTH_BENCH=1 since the fifth slice (measured in four, 12.4-18.4 views per second; 18 s of
+# training each time).
+if [ "${SYNTH_BENCH:-0}" = 1 ]; then
+  timeout ${T_BENCH:-45} $lirm bench synth --scenes "${SYNTH_SCENES:-6}" --views 8 --size 256
+fi
 echo "[$(left) s left] timings done"
 
 # Checkpointing off where a step's 115 GiB fit (the H200: 1.32 s per step instead of 2.41 in the third
@@ -76,13 +80,19 @@ views=(--scene-views "${SCENE_VIEWS:-12}")
 [ -f resources/checkpoints/lirm-small-resume.safetensors ] && resume=(--resume resources/checkpoints/lirm-small-resume.safetensors)
 $lirm train --preset "${PRESET:-small}" --stage 1 --stage-steps "${STAGE_STEPS:-3000}" --batch-scenes "${BATCH_SCENES:-16}" \
   --workers "$workers" --device $device --out "$work/run" --checkpoint-every "${CHECKPOINT_EVERY:-100}" \
-  --eval-every "${EVAL_EVERY:-100}" --eval-objects 2 --slim-copy "$work/slim.safetensors" --checkpointing "$checkpointing" "${resume[@]}" "${views[@]}" &
+  --eval-every "${EVAL_EVERY:-100}" --eval-objects 2 --slim-copy "$work/slim.safetensors" --slim-only \
+  --checkpointing "$checkpointing" "${resume[@]}" "${views[@]}" &
 pid=$!
 # The deadline is kept whatever the trainer is doing: a first SIGINT (to the trainer alone) stops at
-# the end of its step with a checkpoint; a second, 25 s later, interrupts a step still waiting for its
-# data (the slim copy is written on the way out); 20 s after that it is killed and what exists is packed.
-stop_at=$(( $(left) - ${STOP_MARGIN:-75} ))
-( sleep "$stop_at"; kill -INT $pid 2>/dev/null; sleep 25; kill -INT $pid 2>/dev/null; sleep 20; kill -KILL $pid 2>/dev/null ) &
+# the end of its step with the slim copy; a second, STOP_GRACE s later, interrupts a step still waiting
+# for its data (the slim copy of the last finished step is written on the way out); KILL_GRACE s after
+# that it is killed and what exists is packed. A step takes about 2 s on the H200, so 12 and 10 s
+# suffice there (the fifth slice's run ended 16 s after the first SIGINT, 10 of them a full checkpoint
+# it no longer writes); the CPU dry run, whose steps are far slower, passes longer ones.
+grace=${STOP_GRACE:-12}
+kill_grace=${KILL_GRACE:-10}
+stop_at=$(( $(left) - ${STOP_MARGIN:-35} ))
+( sleep "$stop_at"; kill -INT $pid 2>/dev/null; sleep "$grace"; kill -INT $pid 2>/dev/null; sleep "$kill_grace"; kill -KILL $pid 2>/dev/null ) &
 watchdog=$!
 wait $pid
 echo "[$(left) s left] training returned $?"

@@ -75,6 +75,9 @@ class TrainConfig:
     max_skipped_steps: int = 20
     batch_scenes: int | None = None  # scenes per step over all processes; None: the stage's
     slim_copy: str | None = None  # also write the last checkpoint here as float16 weights + step, no moments
+    # False: only the slim copy, at the same cadence and at the end (a GPU slice's disk is lost after the
+    # call, and each full checkpoint with its moments and `last.safetensors` cost it about 10 s of training).
+    full_checkpoints: bool = True
     # Gradient checkpointing of the transformer and of the crops' renders: "auto" is on for GPUs (a `small`
     # step of 16 scenes then peaks at 5.8 GiB instead of 115), "off" trades that memory for speed where it
     # fits (1.32 s per step against 2.41 on the H200 of the third slice, `lirm bench train --checkpointing both`).
@@ -258,6 +261,8 @@ def check_scene_views(scenes: TrainingSceneConfig | None, stage: StageConfig, st
 def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> TrainResult:
     stage = config.stage_settings()
     check_scene_views(config.scenes, stage, config.stage)
+    if not config.full_checkpoints and not config.slim_copy:
+        raise LirmUsageError("without full checkpoints the run needs a slim copy (--slim-copy FILE): nothing would be saved")
     out_dir = Path(config.out_dir)
     model, start_step, optimizer_state, moments_dropped = _prepare_model(config, stage, info)
     end_step = min(stage.steps, config.max_steps) if config.max_steps else stage.steps
@@ -353,7 +358,8 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
                 if progress:
                     progress(record)
             if done % config.checkpoint_every == 0 or done == end_step:
-                checkpoint = _save(out_dir, model, optimizer, config.stage, done, run, info)
+                if config.full_checkpoints:
+                    checkpoint = _save(out_dir, model, optimizer, config.stage, done, run, info)
                 if info.is_main and config.slim_copy:  # kept current too: a killed run still leaves one to resume from
                     save_slim_checkpoint(Path(config.slim_copy), model, config.stage, done, run)
                     slim_step = done
@@ -361,7 +367,7 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
                 evaluator.run(model, done, writer)
                 model.train()
             if any_process(stop.requested or bool(cancel and cancel()), info):
-                if done % config.checkpoint_every and done != end_step:
+                if done % config.checkpoint_every and done != end_step and config.full_checkpoints:
                     checkpoint = _save(out_dir, model, optimizer, config.stage, done, run, info)
                 stopped_early = done < end_step
                 break
@@ -386,6 +392,8 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
         finally:
             if previous_handler is not None:
                 signal.signal(signal.SIGINT, previous_handler)
+    if not config.full_checkpoints and history and info.is_main:
+        checkpoint = Path(config.slim_copy)  # what to resume from: the only checkpoint there is
     return TrainResult(out_dir, config.stage, start_step, history[-1]["step"] if history else start_step, history,
                        stopped_early, checkpoint)
 

@@ -114,6 +114,19 @@ def test_a_slim_copy_resumes_at_its_step_with_fresh_moments_and_a_warm_up(tmp_pa
     assert [int(r["step"]) for r in _csv(tmp_path / "run" / "metrics.csv")] == [1, 2, 3, 4]
 
 
+def test_slim_only_saves_the_slim_copy_alone_and_needs_one(tmp_path, cache):
+    """A GPU slice's disk is lost after the call: `--slim-only` writes no full checkpoint (with its moments
+    and `last.safetensors`), only the slim copy at the checkpoint cadence, and names it as what to resume."""
+    slim = tmp_path / "slim.safetensors"
+    result = run_training(_config(tmp_path / "run", cache, max_steps=2, checkpoint_every=1, slim_copy=str(slim),
+                                  batch_scenes=1, full_checkpoints=False))
+    assert result.checkpoint == slim and peek_checkpoint(slim)[1]["training"]["step"] == 2
+    assert not list((tmp_path / "run").glob("*.safetensors"))
+    assert [int(r["step"]) for r in _csv(tmp_path / "run" / "metrics.csv")] == [1, 2]
+    with pytest.raises(LirmUserError, match="--slim-copy"):
+        run_training(_config(tmp_path / "none", cache, max_steps=1, full_checkpoints=False))
+
+
 def test_batch_scenes_overrides_the_stages_batch():
     config = TrainConfig(preset="small", stage=1, batch_scenes=8)
     assert config.stage_settings().batch_scenes == 8
