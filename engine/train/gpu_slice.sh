@@ -8,8 +8,10 @@
 # It installs the project, checks EGL, with TIMINGS=1 times the update loop (paper at 512 and 256 px,
 # small; bf16), with SYNTH_BENCH=1 measures the data generator, then trains `small` stage 1 until its deadline, resuming from
 # resources/checkpoints/lirm-small-resume.safetensors when that exists. What comes back in $OUT:
-# the float16 resume copy split in 15 MiB parts (slim.part*; `cat slim.part* > F` joins them) and
-# logs.tar.gz (metrics.csv, eval.csv, run json, loss curves, timings, the log).
+# the float16 resume copy split in 15 MiB parts (slim.part*; `cat slim.part* > F` joins them), AdamW's
+# second moments in 8 bits beside it (adamv.part*, joined into F's companion, the same name ending in
+# .adam-v.safetensors: the next slice then needs no warm-up; second_moments.py) and logs.tar.gz
+# (metrics.csv, eval.csv, run json, loss curves, timings, the log).
 set -u
 budget=${1:-540}
 t0=$(date +%s)
@@ -104,5 +106,6 @@ kill $watchdog 2>/dev/null
 
 cp "$work/run"/metrics.csv "$work/run"/eval.csv "$work/run"/stage1_run.json "$work/run"/loss_curves.png "$work/" 2>/dev/null
 [ -f "$work/slim.safetensors" ] && split -b 15M -d "$work/slim.safetensors" "$OUT/slim.part"
-tar -C "$work" -czf "$OUT/logs.tar.gz" --exclude run --exclude slim.safetensors .
+[ -f "$work/slim.adam-v.safetensors" ] && split -b 15M -d "$work/slim.adam-v.safetensors" "$OUT/adamv.part"
+tar -C "$work" -czf "$OUT/logs.tar.gz" --exclude run --exclude slim.safetensors --exclude slim.adam-v.safetensors .
 echo "[$(left) s left] packed: $(ls "$OUT")"

@@ -43,6 +43,7 @@ from .losses import LossWeights
 from .objective import TrainingObjective
 from .perceptual import perceptual_loss
 from .scene_source import SceneSource
+from .second_moments import second_moments_path
 from .stages import StageConfig, stage_config
 from .training_checkpoint import load_resume_point, restore_optimizer, save_slim_checkpoint, save_training_checkpoint
 from .train_step import train_step, training_optimizer, training_render
@@ -225,18 +226,22 @@ def run_training(config: TrainConfig, progress: Callable[[dict], None] | None = 
 
 def _prepare_model(config: TrainConfig, stage: StageConfig, info: ProcessGroupInfo) -> tuple[LIRM, int, dict, bool]:
     """The model to train, the step to start at, the resume point's optimizer state (if continuing)
-    and whether its moments were dropped (a slim checkpoint)."""
+    and whether its moments were dropped (a slim checkpoint without its second moments beside it)."""
     if config.resume:
         point = load_resume_point(config.resume, config.preset)  # errors before any compute is spent
         if point.stage == config.stage:
             if point.step >= stage.steps:
                 raise LirmUserError(f"checkpoint {config.resume} already finished stage {config.stage} ({point.step} of "
                                     f"{stage.steps} steps); go on with --stage {config.stage + 1} --resume {config.resume}")
+            warm_up = point.moments_dropped and not point.second_moments
             if info.is_main:
-                log.info("continuing stage %d from step %d of %s%s", config.stage, point.step, config.resume,
-                         " (slim checkpoint: fresh AdamW moments, learning rate warmed up again over "
-                         f"{MOMENT_RESTART_STEPS} steps)" if point.moments_dropped else "")
-            return point.model.train(), point.step, point.optimizer_state, point.moments_dropped
+                how = ""
+                if warm_up:
+                    how = f" (slim checkpoint: fresh AdamW moments, learning rate warmed up again over {MOMENT_RESTART_STEPS} steps)"
+                elif point.moments_dropped:
+                    how = " (slim checkpoint: AdamW's second moments restored from beside it, the first afresh; no warm-up)"
+                log.info("continuing stage %d from step %d of %s%s", config.stage, point.step, config.resume, how)
+            return point.model.train(), point.step, point.optimizer_state, warm_up
         if info.is_main:
             what = f"stage {point.stage}" if point.stage else "model-only"
             log.info("starting stage %d from the weights of %s (%s checkpoint)", config.stage, config.resume, what)
@@ -361,7 +366,7 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
                 if config.full_checkpoints:
                     checkpoint = _save(out_dir, model, optimizer, config.stage, done, run, info)
                 if info.is_main and config.slim_copy:  # kept current too: a killed run still leaves one to resume from
-                    save_slim_checkpoint(Path(config.slim_copy), model, config.stage, done, run)
+                    save_slim_checkpoint(Path(config.slim_copy), model, config.stage, done, run, optimizer)
                     slim_step = done
             if evaluator is not None and (done % config.eval_every == 0 or done == end_step):
                 evaluator.run(model, done, writer)
@@ -381,8 +386,10 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
                 writer.close()
             if info.is_main and config.slim_copy and history:
                 if history[-1]["step"] != slim_step:  # a run ending on a checkpoint wrote it there already
-                    save_slim_checkpoint(Path(config.slim_copy), model, config.stage, history[-1]["step"], run)
-                log.info("slim checkpoint (float16, no moments) of step %d written to %s", history[-1]["step"], config.slim_copy)
+                    save_slim_checkpoint(Path(config.slim_copy), model, config.stage, history[-1]["step"], run, optimizer)
+                beside = second_moments_path(config.slim_copy)
+                log.info("slim checkpoint (float16) of step %d written to %s%s", history[-1]["step"], config.slim_copy,
+                         f", AdamW's second moments in 8 bits beside it ({beside.name})" if beside.is_file() else "")
             if info.is_main and (out_dir / "metrics.csv").is_file():
                 from .loss_curve import write_loss_curves
 

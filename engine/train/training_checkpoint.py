@@ -17,6 +17,8 @@ from lirm.engine.errors import LirmUserError
 from lirm.engine.model.checkpoint import load_checkpoint, load_training_tensors, peek_checkpoint, save_checkpoint
 from lirm.engine.model.lirm import LIRM
 
+from .second_moments import load_second_moments, save_second_moments
+
 _MOMENTS = ("exp_avg", "exp_avg_sq", "step")
 
 
@@ -28,6 +30,7 @@ class ResumePoint:
     run: dict  # the run's settings as saved
     optimizer_state: dict[str, torch.Tensor]  # "param_name/moment" -> tensor (empty for model-only checkpoints)
     moments_dropped: bool = False  # a slim checkpoint: continue at `step` with fresh AdamW moments
+    second_moments: bool = False  # ... but its second moments were beside it (second_moments.py): no warm-up
 
 
 def save_training_checkpoint(path: Path, model: LIRM, optimizer: torch.optim.Optimizer, stage: int, step: int,
@@ -43,13 +46,19 @@ def save_training_checkpoint(path: Path, model: LIRM, optimizer: torch.optim.Opt
     return save_checkpoint(model, path, metadata=metadata, training_tensors=tensors)
 
 
-def save_slim_checkpoint(path: Path, model: LIRM, stage: int, step: int, run: dict) -> Path:
+def save_slim_checkpoint(path: Path, model: LIRM, stage: int, step: int, run: dict,
+                         optimizer: torch.optim.Optimizer | None = None) -> Path:
     """The weights in float16 with the stage and step but no AdamW moments: a third of a full
     checkpoint's size, small enough to keep in the repository and carry between GPU slices. A run
-    resumed from it continues the same step (and so the same data and schedule); its moments restart
-    and the learning rate warms up again over a few steps (trainer.MOMENT_RESTART_STEPS)."""
+    resumed from it continues the same step (and so the same data and schedule). With `optimizer`, its
+    second moments are written beside it in 8 bits (second_moments.py), and a resumed run restores them
+    and needs no warm-up; without them its moments restart and the learning rate warms up again over a
+    few steps (trainer.MOMENT_RESTART_STEPS)."""
     metadata = {"training": {"stage": stage, "step": step, "run": run, "moments": "dropped"}, "trained": True}
-    return save_checkpoint(model, path, dtype=torch.float16, metadata=metadata)
+    written = save_checkpoint(model, path, dtype=torch.float16, metadata=metadata)
+    if optimizer is not None:
+        save_second_moments(path, model, optimizer, stage, step)
+    return written
 
 
 def load_resume_point(path: str | Path, preset: str) -> ResumePoint:
@@ -60,8 +69,11 @@ def load_resume_point(path: str | Path, preset: str) -> ResumePoint:
     if not isinstance(training, dict) or not {"stage", "step"} <= set(training):
         # A model-only checkpoint (e.g. the shipped one) can still start a stage from its weights.
         return ResumePoint(model, 0, 0, {}, {})
-    return ResumePoint(model, int(training["stage"]), int(training["step"]), dict(training.get("run") or {}),
-                       load_training_tensors(path), moments_dropped=training.get("moments") == "dropped")
+    stage, step, dropped = int(training["stage"]), int(training["step"]), training.get("moments") == "dropped"
+    state = load_training_tensors(path)
+    second = load_second_moments(path, model, stage, step) if dropped else None
+    return ResumePoint(model, stage, step, dict(training.get("run") or {}), second or state,
+                       moments_dropped=dropped, second_moments=second is not None)
 
 
 def restore_optimizer(optimizer: torch.optim.Optimizer, model: LIRM, state: dict[str, torch.Tensor], path: str | Path) -> None:

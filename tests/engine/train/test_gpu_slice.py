@@ -46,10 +46,17 @@ def test_a_slice_dry_run_resumes_trains_and_brings_back_weights_that_resume_late
     assert parts, text[-3000:]
     joined = tmp_path / "slim.safetensors"
     joined.write_bytes(b"".join(p.read_bytes() for p in parts))
+    # AdamW's second moments come back beside it, and joined under the companion's name they resume too.
+    moments = sorted(out.glob("adamv.part*"))
+    assert moments, text[-3000:]
+    companion = tmp_path / "slim.adam-v.safetensors"
+    companion.write_bytes(b"".join(p.read_bytes() for p in moments))
     before, after = load_resume_point(RESUME, "small"), load_resume_point(joined, "small")
-    assert after.stage == 1 and after.moments_dropped
+    assert after.stage == 1 and after.moments_dropped and after.second_moments
     assert after.step > before.step
-    assert joined.stat().st_size <= 50 * 2**20  # what the repository keeps: fp16, at most 50 MB
+    # What the repository keeps: fp16 weights and the 8-bit moments, at most 50 MB together.
+    assert joined.stat().st_size + companion.stat().st_size <= 50 * 2**20
+    assert len(list(out.iterdir())) <= 8  # what a device call brings back: at most 8 files
 
     with tarfile.open(out / "logs.tar.gz") as logs:
         names = {Path(n).name for n in logs.getnames()}

@@ -95,8 +95,8 @@ def test_a_slim_copy_resumes_at_its_step_with_fresh_moments_and_a_warm_up(tmp_pa
 
     written = []
     real_save = trainer.save_slim_checkpoint
-    monkeypatch.setattr(trainer, "save_slim_checkpoint", lambda path, model, stage, step, run: (
-        written.append(step), real_save(path, model, stage, step, run)))
+    monkeypatch.setattr(trainer, "save_slim_checkpoint", lambda path, model, stage, step, run, optimizer=None: (
+        written.append(step), real_save(path, model, stage, step, run)))  # without the optimizer: no second moments
     slim = tmp_path / "slim.safetensors"
     first = run_training(_config(tmp_path / "run", cache, max_steps=2, checkpoint_every=2, slim_copy=str(slim),
                                  batch_scenes=1))
@@ -112,6 +112,45 @@ def test_a_slim_copy_resumes_at_its_step_with_fresh_moments_and_a_warm_up(tmp_pa
         expected = learning_rate(stage, step) * (step - 2 + 1) / MOMENT_RESTART_STEPS
         assert record["lr"] == pytest.approx(expected)
     assert [int(r["step"]) for r in _csv(tmp_path / "run" / "metrics.csv")] == [1, 2, 3, 4]
+
+
+def test_a_slim_copy_with_its_second_moments_resumes_without_a_warm_up(tmp_path, cache, caplog):
+    """The trainer writes AdamW's second moments beside the slim copy in 8 bits: a run resumed from it
+    restores them (close to the full checkpoint's), starts the first moments afresh and keeps the
+    scheduled learning rate; a companion of another step is ignored, and the warm-up comes back."""
+    from lirm.engine.train.second_moments import second_moments_path
+    from lirm.engine.train.trainer import learning_rate
+    from lirm.engine.train.training_checkpoint import load_resume_point
+
+    slim = tmp_path / "slim.safetensors"
+    first = run_training(_config(tmp_path / "run", cache, max_steps=2, checkpoint_every=2, slim_copy=str(slim),
+                                 batch_scenes=1))
+    companion = second_moments_path(slim)
+    model = load_checkpoint(slim)[0]
+    assert companion.is_file() and companion.stat().st_size < 1.1 * sum(p.numel() for p in model.parameters()) + 2**20
+    point = load_resume_point(slim, "tiny")
+    assert point.moments_dropped and point.second_moments
+    exact = load_resume_point(first.checkpoint, "tiny").optimizer_state
+    for name, _ in list(model.named_parameters())[:6]:
+        restored, truth = point.optimizer_state[f"{name}/exp_avg_sq"], exact[f"{name}/exp_avg_sq"]
+        positive = truth > 0
+        ratio = (restored[positive] / truth[positive]).sqrt()
+        assert float((ratio - 1).abs().max()) < 0.05, name
+        assert not point.optimizer_state[f"{name}/exp_avg"].any()
+        assert float(point.optimizer_state[f"{name}/step"]) == float(exact[f"{name}/step"]) == 2.0
+
+    aside = tmp_path / "step2.adam-v.safetensors"
+    aside.write_bytes(companion.read_bytes())
+    resumed = run_training(_config(tmp_path / "run", cache, max_steps=4, resume=str(slim), batch_scenes=1,
+                                   checkpoint_every=2, slim_copy=str(slim)))
+    stage = _config(tmp_path, cache).stage_settings()
+    assert [r["lr"] for r in resumed.history] == [pytest.approx(learning_rate(stage, s)) for s in (2, 3)]
+    assert load_resume_point(slim, "tiny").step == 4 and load_resume_point(slim, "tiny").second_moments
+
+    companion.write_bytes(aside.read_bytes())  # step 2's moments beside step 4's weights
+    with caplog.at_level("WARNING"):
+        stale = load_resume_point(slim, "tiny")
+    assert stale.moments_dropped and not stale.second_moments and "not of the resumed stage 1 step 4" in caplog.text
 
 
 def test_slim_only_saves_the_slim_copy_alone_and_needs_one(tmp_path, cache):
