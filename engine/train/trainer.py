@@ -12,8 +12,10 @@ normal loss in stage 3. Process 0 writes metrics.csv, TensorBoard logs, checkpoi
 evaluations (eval.csv).
 
 Resuming a checkpoint of the same stage continues the run exactly (weights, AdamW moments, step;
-the data of a step depends only on the data seed and the step). A checkpoint of another stage, or
-a model-only checkpoint, starts this stage from its weights.
+the data of a step depends only on the data seed and the step). A slim copy (the GPU slices')
+continues the step with AdamW's second moments from its 8-bit companion when one is beside it, else
+with fresh moments and a short learning-rate warm-up. A checkpoint of another stage, or a model-only
+checkpoint, starts this stage from its weights.
 """
 
 from __future__ import annotations
