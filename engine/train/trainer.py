@@ -270,6 +270,9 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
     check_scene_views(config.scenes, stage, config.stage)
     if not config.full_checkpoints and not config.slim_copy:
         raise LirmUsageError("without full checkpoints the run needs a slim copy (--slim-copy FILE): nothing would be saved")
+    if config.slim_copy and not str(config.slim_copy).endswith(".safetensors"):
+        # Found here, not at the first save after minutes of steps.
+        raise LirmUsageError(f"--slim-copy {config.slim_copy}: the file name must end in .safetensors")
     out_dir = Path(config.out_dir)
     model, start_step, optimizer_state, moments_dropped = _prepare_model(config, stage, info)
     end_step = min(stage.steps, config.max_steps) if config.max_steps else stage.steps

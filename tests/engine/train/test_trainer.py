@@ -164,6 +164,9 @@ def test_slim_only_saves_the_slim_copy_alone_and_needs_one(tmp_path, cache):
     assert [int(r["step"]) for r in _csv(tmp_path / "run" / "metrics.csv")] == [1, 2]
     with pytest.raises(LirmUserError, match="--slim-copy"):
         run_training(_config(tmp_path / "none", cache, max_steps=1, full_checkpoints=False))
+    with pytest.raises(LirmUserError, match="must end in .safetensors"):
+        run_training(_config(tmp_path / "bad", cache, max_steps=1, slim_copy=str(tmp_path / "slim.pt")))
+    assert not (tmp_path / "bad").exists()  # refused before anything was written or computed
 
 
 def test_batch_scenes_overrides_the_stages_batch():
