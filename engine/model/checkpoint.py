@@ -30,13 +30,20 @@ PICKLE_SUFFIXES = (".pt", ".pth", ".ckpt", ".bin", ".pkl")
 TRAINING_PREFIX = "training."
 
 
+def require_safetensors_name(path: str | Path) -> Path:
+    """The path of a checkpoint to write, refused unless it names a .safetensors file (callers that save
+    late, e.g. a training run's slim copy, check it before the work starts)."""
+    path = Path(path)
+    if path.suffix != ".safetensors":
+        raise LirmUserError(f"cannot save checkpoint {path}: the file name must end in .safetensors")
+    return path
+
+
 def save_checkpoint(model: LIRM, path: str | Path, *, dtype: torch.dtype | None = None,
                     metadata: dict | None = None, training_tensors: dict[str, torch.Tensor] | None = None) -> Path:
     """Write the model's weights (floating ones cast to `dtype` if given) and config to `path`;
     `training_tensors` (optimizer state) are stored as they are, under TRAINING_PREFIX."""
-    path = Path(path)
-    if path.suffix != ".safetensors":
-        raise LirmUserError(f"cannot save checkpoint {path}: the file name must end in .safetensors")
+    path = require_safetensors_name(path)
     config = model.config
     # clone(): safetensors refuses tensors that share memory or are not contiguous.
     tensors = {name: (t.detach().to("cpu", dtype) if dtype is not None and t.is_floating_point()

@@ -35,6 +35,7 @@ from torch.utils.data import DataLoader, IterableDataset, get_worker_info
 
 from lirm.engine.errors import LirmUsageError, LirmUserError
 from lirm.engine.io.atomic_files import atomic_write, atomic_write_json
+from lirm.engine.model.checkpoint import require_safetensors_name
 from lirm.engine.model.config import preset as model_preset
 from lirm.engine.model.lirm import LIRM
 from lirm.engine.model.occupancy_grid import OccupancyConfig
@@ -228,7 +229,7 @@ def run_training(config: TrainConfig, progress: Callable[[dict], None] | None = 
 
 def _prepare_model(config: TrainConfig, stage: StageConfig, info: ProcessGroupInfo) -> tuple[LIRM, int, dict, bool]:
     """The model to train, the step to start at, the resume point's optimizer state (if continuing)
-    and whether its moments were dropped (a slim checkpoint without its second moments beside it)."""
+    and whether AdamW starts afresh with a warm-up (a slim checkpoint without its second moments beside it)."""
     if config.resume:
         point = load_resume_point(config.resume, config.preset)  # errors before any compute is spent
         if point.stage == config.stage:
@@ -270,11 +271,10 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
     check_scene_views(config.scenes, stage, config.stage)
     if not config.full_checkpoints and not config.slim_copy:
         raise LirmUsageError("without full checkpoints the run needs a slim copy (--slim-copy FILE): nothing would be saved")
-    if config.slim_copy and not str(config.slim_copy).endswith(".safetensors"):
-        # Found here, not at the first save after minutes of steps.
-        raise LirmUsageError(f"--slim-copy {config.slim_copy}: the file name must end in .safetensors")
+    if config.slim_copy:  # found here, not at the first save after minutes of steps
+        require_safetensors_name(config.slim_copy)
     out_dir = Path(config.out_dir)
-    model, start_step, optimizer_state, moments_dropped = _prepare_model(config, stage, info)
+    model, start_step, optimizer_state, fresh_moments = _prepare_model(config, stage, info)
     end_step = min(stage.steps, config.max_steps) if config.max_steps else stage.steps
     if start_step >= end_step:
         raise LirmUserError(f"nothing to do: the run is at step {start_step} and --max-steps is {config.max_steps}")
@@ -284,7 +284,7 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
     checkpointing = config.uses_checkpointing(device)
     model.transformer.gradient_checkpointing = checkpointing
     optimizer = training_optimizer(model, stage.learning_rate[0])
-    if start_step > 0 and not moments_dropped:  # continuing: the moments must be there (restore_optimizer says so if not)
+    if start_step > 0 and not fresh_moments:  # continuing: the moments must be there (restore_optimizer says so if not)
         restore_optimizer(optimizer, model, optimizer_state, config.resume)
     weights = replace(config.losses, numerical_normal=stage.numerical_normal_weight)
     # With checkpointing the crops' renders are recomputed in the backward pass: without it a `small` step of
@@ -340,7 +340,7 @@ def _train(config: TrainConfig, info: ProcessGroupInfo, progress, cancel) -> Tra
             step = sample.step
             data_seconds = time.perf_counter() - data_start
             step_start = time.perf_counter()
-            lr = learning_rate(stage, step) * (moment_restart_factor(step, start_step) if moments_dropped else 1.0)
+            lr = learning_rate(stage, step) * (moment_restart_factor(step, start_step) if fresh_moments else 1.0)
             for group in optimizer.param_groups:
                 group["lr"] = lr
             inv_beta = inverse_beta(stage, step)
