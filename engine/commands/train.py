@@ -34,7 +34,8 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--device", default="auto", help="auto (CUDA when present), cpu or cuda")
     parser.add_argument("--batch-scenes", type=int, help="scenes per step over all processes (default: the stage's)")
     parser.add_argument("--slim-copy", type=Path, help="at the end, also write the weights as float16 with the step but no "
-                        "AdamW moments (a third of the size; --resume from it continues the step with fresh moments)")
+                        "AdamW moments (a third of the size), with the second moments in 8 bits beside it (F.adam-v.safetensors); "
+                        "--resume from it continues the step with those, or with fresh moments and a warm-up when they are missing")
     parser.add_argument("--slim-only", action="store_true", help="save only the --slim-copy (every --checkpoint-every steps "
                         "and at the end), no full checkpoints with AdamW moments: for a machine whose disk is lost after the run")
     parser.add_argument("--checkpointing", default="auto", choices=["auto", "on", "off"],
