@@ -8,6 +8,9 @@ prefiltered tables) with parts exchanged between the two G-buffers pixel for pix
 - `export`: nothing swapped (the twin's check: it equals the renderer's relit export);
 - `truth_albedo` / `truth_materials`: the export's surface with the truth's albedo / albedo, roughness
   and metallic (what perfect materials on this geometry would score);
+- `truth_roughness`: the export's albedo and metallic with the truth's roughness; `truth_albedo_roughness`
+  / `truth_albedo_metallic`: the truth's albedo with its roughness / its metallic (the step from
+  `truth_albedo` to `truth_materials` split between the two);
 - `truth_geometry`: the truth's surface and normals with the export's albedo, roughness and metallic
   (what perfect geometry under these materials would score);
 - `truth_albedo_detail`: the export's albedo with its detail (what a Gaussian of `DETAIL_SIGMA`
@@ -34,7 +37,8 @@ from lirm.renderer.pbr_renderer import box_downsample
 
 DETAIL_SIGMA = 2.0  # output pixels: what is finer than this Gaussian counts as the albedo's detail
 EXPORTED_MATERIAL_KEYS = ("exported_albedo_psnr", "exported_roughness_psnr", "exported_metallic_psnr")
-SWAPS = ("export", "truth_albedo", "truth_materials", "truth_geometry", "truth_albedo_detail", "truth_albedo_coarse")
+SWAPS = ("export", "truth_albedo", "truth_materials", "truth_geometry", "truth_albedo_detail", "truth_albedo_coarse",
+         "truth_roughness", "truth_albedo_roughness", "truth_albedo_metallic")
 
 
 def masked_blur(image: np.ndarray, coverage: np.ndarray, sigma: float) -> np.ndarray:
@@ -85,6 +89,11 @@ def swapped_images(export, truth, tables, directions: np.ndarray, supersample: i
                                           mix(truth.metallic, export.metallic), truth.normal, truth.mask, directions), truth.mask),
         "truth_albedo_detail": (on_export(mix(export.albedo, export_coarse * truth_detail)), export.mask),
         "truth_albedo_coarse": (on_export(mix(export.albedo, truth_coarse * export_detail)), export.mask),
+        "truth_roughness": (on_export(export.albedo, mix(export.roughness, truth.roughness)), export.mask),
+        "truth_albedo_roughness": (on_export(mix(export.albedo, truth.albedo), mix(export.roughness, truth.roughness)),
+                                   export.mask),
+        "truth_albedo_metallic": (on_export(mix(export.albedo, truth.albedo), export.roughness,
+                                            mix(export.metallic, truth.metallic)), export.mask),
     }
     return {name: (box_downsample(image, supersample), box_downsample(coverage[..., None], supersample)[..., 0])
             for name, (image, coverage) in images.items()}

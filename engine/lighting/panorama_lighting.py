@@ -131,6 +131,22 @@ class PanoramaLighting(torch.nn.Module):
         x = self.log_radiance
         return cost(x - x.roll(1, dims=1)).mean() + cost(x[1:] - x[:-1]).mean()
 
+    def neutrality_loss(self) -> torch.Tensor:
+        """How far the light's colour is from grey where no photo saw it: the L1 deviation of each
+        texel's log radiance from its mean over the channels, weighted by how little of the texel was
+        seen (and, for the compact lights, which no photo saw, of their amplitude). Without it the fit
+        may colour the unseen sky after the object (a yellow mug under a yellow sky) and the albedo
+        the other way; in every environment at hand the unseen upper sky is as neutral as the seen
+        ground or bluer (README)."""
+        x = self.log_radiance
+        deviation = (x - x.mean(dim=-1, keepdim=True)).abs().mean(-1)
+        unseen = 1.0 - self.seen_share if hasattr(self, "seen_share") else torch.ones_like(deviation)
+        loss = (unseen * deviation).sum() / unseen.sum().clamp(min=1e-6)
+        if self.light_lobes:
+            a = self.lobe_log_amplitude
+            loss = loss + (a - a.mean(dim=-1, keepdim=True)).abs().mean()
+        return loss
+
     @property
     def light_lobes(self) -> int:
         return self.lobe_axes.shape[0] if hasattr(self, "lobe_axes") else 0

@@ -57,8 +57,15 @@ class LossWeights:
     # The albedo's L1 difference over a short step on the surface (albedo_smoothness.py): grain the
     # albedo took from a grainy normal goes back to the normal and the light. Off: measured worse (README).
     albedo_smooth: float = 0.0
+    # Each surface point's albedo held to the mean albedo of the batch's points with a like albedo
+    # (shared_materials.shared_albedo_loss, the same kernel as shared_materials): a paint is one
+    # colour, so the slow shading a wrong light leaves in it must go to the light. Off (README: its worth).
+    shared_albedo: float = 0.0
     light_seen: float = 0.2
     light_smooth: float = 0.02
+    # The fitted light's colour held neutral where no photo saw it (PanoramaLighting.neutrality_loss).
+    # Off (README: its worth).
+    light_neutral: float = 0.0
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -15,7 +15,7 @@ from lirm.engine.lighting.split_sum_shading import shade
 from .albedo_smoothness import albedo_difference
 from .config import CURVATURE_STEP, LossWeights
 from .ray_rendering import RayBatchRender
-from .shared_materials import ALBEDO_SIGMA, shared_material_loss
+from .shared_materials import ALBEDO_SIGMA, shared_albedo_loss, shared_material_loss
 from .unshaded_albedo import normal_explained_albedo
 
 
@@ -55,7 +55,9 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
         terms.update(inverse_rendering_terms(render, colours, alphas, lighting, directions, delit=weights.albedo_delit > 0,
                                              shared_materials=weights.shared_materials > 0,
                                              share_metallic=weights.share_metallic, sigma=weights.shared_albedo_sigma,
-                                             unshaded_albedo=weights.albedo_unshaded > 0))
+                                             unshaded_albedo=weights.albedo_unshaded > 0,
+                                             shared_albedo=weights.shared_albedo > 0,
+                                             light_neutral=weights.light_neutral > 0))
         if weights.albedo_pairs and pairs is not None and pairs.shape[0]:
             terms["albedo_pairs"] = paired_albedo_smoothness(render, colours, alphas, pairs)
         weights = replace(weights, albedo=0.0)  # the albedo is fitted through the shading, not to the colour
@@ -120,13 +122,16 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
 def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alphas: torch.Tensor, lighting,
                             directions: torch.Tensor, delit: bool = False,
                             shared_materials: bool = False, share_metallic: bool = True,
-                            sigma: float = ALBEDO_SIGMA, unshaded_albedo: bool = False) -> dict[str, torch.Tensor]:
+                            sigma: float = ALBEDO_SIGMA, unshaded_albedo: bool = False, shared_albedo: bool = False,
+                            light_neutral: bool = False) -> dict[str, torch.Tensor]:
     """The PBR materials at the rays' surfaces shaded under `lighting` (the renderer's split-sum model),
     through the camera's tone curve, against the photo, where both say object; and the lighting's own
     terms (what the backgrounds saw, smoothness)."""
     opacity = render.opacity
     solid = (alphas > 0.99) & (opacity.detach() > 0.5)
     terms = {"light_seen": lighting.observation_loss(), "light_smooth": lighting.smoothness_loss()}
+    if light_neutral:
+        terms["light_neutral"] = lighting.neutrality_loss()
     if not solid.any():
         terms["pbr"] = opacity.new_zeros(())
         return terms
@@ -139,6 +144,8 @@ def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alpha
     terms["pbr"] = (radiance_to_display_torch(shaded) - colours[solid]).abs().mean()
     if shared_materials:
         terms["shared_materials"] = shared_material_loss(albedo, roughness, metallic if share_metallic else None, sigma)
+    if shared_albedo:
+        terms["shared_albedo"] = shared_albedo_loss(albedo, sigma)
     if unshaded_albedo:
         terms["albedo_unshaded"] = normal_explained_albedo(albedo, normal)
     if not delit:  # its four extra shadings per ray are only worth paying for when the term counts

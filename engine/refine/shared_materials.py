@@ -43,3 +43,14 @@ def shared_material_loss(albedo: torch.Tensor, roughness: torch.Tensor, metallic
     materials = torch.stack([roughness] + ([] if metallic is None else [metallic]), dim=-1)
     targets = like_albedo_targets(albedo, materials, sigma)
     return ((materials - targets) ** 2).sum(-1).mean()
+
+
+def shared_albedo_loss(albedo: torch.Tensor, sigma: float = ALBEDO_SIGMA) -> torch.Tensor:
+    """(N, 3) albedo at surface points -> the mean squared distance of each to the mean albedo of its
+    paint (like_albedo_targets of the albedo itself: one mean-shift step). Within a paint the albedo
+    is pulled flat, so a slow change of brightness over it (shading that a wrong light left there)
+    must be explained by the light and the surface instead; another paint, a kernel width away or
+    more, is not pulled."""
+    if albedo.shape[0] < 2:
+        return albedo.new_zeros(())
+    return ((albedo - like_albedo_targets(albedo, albedo, sigma)) ** 2).sum(-1).mean()

@@ -64,5 +64,9 @@ def test_swapping_in_the_true_albedo_fixes_an_export_whose_albedo_is_wrong(tmp_p
     mean = {name: float(np.mean(v)) for name, v in scores.items()}
     assert mean["truth_albedo"] > mean["export"] + 10 and mean["truth_materials"] > mean["export"] + 10, mean
     assert abs(mean["truth_geometry"] - mean["export"]) < 1.5, mean  # the same sphere: nothing to gain
+    # Roughness and metallic are the truth's already (0.5, 0): swapping them in changes nothing.
+    assert abs(mean["truth_roughness"] - mean["export"]) < 0.1, mean
+    assert abs(mean["truth_albedo_roughness"] - mean["truth_albedo"]) < 0.1, mean
+    assert abs(mean["truth_albedo_metallic"] - mean["truth_albedo"]) < 0.1, mean
     # The grey export has no detail of its own: the truth's detail on it is most of the way to the truth's albedo.
     assert mean["truth_albedo_detail"] > mean["export"] + 3, mean

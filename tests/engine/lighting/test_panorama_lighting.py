@@ -115,3 +115,27 @@ def test_the_heavy_tailed_smoothness_is_total_variation_for_small_steps_and_lets
     faint, faint_plain = PanoramaLighting(noise, smoothness_scale=0.25), PanoramaLighting(noise)
     ratio = float(faint.smoothness_loss().detach()) / float(faint_plain.smoothness_loss().detach())
     assert 0.9 < ratio <= 1.0  # small steps cost what they did: faint unseen texels stay smooth
+
+
+def test_the_neutrality_term_prices_colour_only_where_no_photo_saw_the_light():
+    """A yellow cast on the unseen upper half costs; the same cast on the seen lower half (what the
+    photos say) and a grey brightening anywhere do not."""
+    environment = Environment(np.full((32, 64, 3), 0.5, np.float32), "grey")
+    observed = np.zeros((32, 64))
+    observed[16:] = 3.0  # the lower half seen
+    estimate = CaptureLighting(environment, observed, np.zeros((32, 64)), 4, CaptureLightingConfig(width=64))
+    lighting = PanoramaLighting.from_capture_lighting(estimate, height=8)
+    assert float(lighting.neutrality_loss()) < 1e-6
+    yellow = torch.tensor([0.5, 0.3, -0.8])
+    with torch.no_grad():
+        lighting.log_radiance[:] += 1.0  # brighter, still grey
+    assert float(lighting.neutrality_loss()) < 1e-6
+    with torch.no_grad():
+        lighting.log_radiance[4:] += yellow  # the seen half yellow
+    assert float(lighting.neutrality_loss()) < 1e-6
+    with torch.no_grad():
+        lighting.log_radiance[:4] += yellow  # the unseen half yellow
+    cost = lighting.neutrality_loss()
+    assert abs(float(cost) - float((yellow - yellow.mean()).abs().mean())) < 1e-5
+    cost.backward()
+    assert float(lighting.log_radiance.grad[:4].abs().sum()) > 0 and float(lighting.log_radiance.grad[4:].abs().sum()) == 0

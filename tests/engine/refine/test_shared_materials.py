@@ -66,3 +66,25 @@ def test_the_kernel_width_says_which_albedos_are_one_paint():
     wide = like_albedo_targets(albedo, roughness, sigma=0.5)[:, 0]
     assert torch.allclose(narrow[:50], torch.tensor(0.2), atol=1e-3) and torch.allclose(narrow[50:], torch.tensor(0.6), atol=1e-3)
     assert float((wide - 0.4).abs().max()) < 0.01
+
+
+def test_the_shared_albedo_flattens_shading_within_a_paint_and_keeps_the_paints_apart():
+    """A cream paint with a slow shading ramp left in it (0.70 to 0.76) and a red one: under the term
+    alone the ramp flattens toward the cream's mean, and the red stays red."""
+    from lirm.engine.refine.shared_materials import shared_albedo_loss
+
+    ramp = torch.linspace(0.0, 0.06, 200)[:, None]
+    cream = torch.tensor([0.70, 0.60, 0.45]) + ramp
+    red = torch.tensor([0.6, 0.05, 0.04]).repeat(200, 1)
+    albedo = torch.cat([cream, red]).requires_grad_(True)
+    optimiser = torch.optim.SGD([albedo], lr=50.0)  # plain steps: Adam would blow up the red's ~0 gradients
+    for _ in range(100):
+        loss = shared_albedo_loss(albedo)
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+    fitted = albedo.detach()
+    assert float(fitted[:200, 0].max() - fitted[:200, 0].min()) < 0.02  # the ramp flattened (from 0.06)
+    assert abs(float(fitted[:200, 0].mean()) - 0.73) < 0.01
+    assert torch.allclose(fitted[200:], torch.tensor([0.6, 0.05, 0.04]), atol=1e-3)
+    assert float(shared_albedo_loss(torch.rand(1, 3))) == 0.0
