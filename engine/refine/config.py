@@ -59,12 +59,13 @@ class LossWeights:
     albedo_smooth: float = 0.0
     # Each surface point's albedo held to the mean albedo of the batch's points with a like albedo
     # (shared_materials.shared_albedo_loss, the same kernel as shared_materials): a paint is one
-    # colour, so the slow shading a wrong light leaves in it must go to the light. Off (README: its worth).
+    # colour, so the slow shading a wrong light leaves in it must go to the light. Off: measured worse
+    # on every object, the fit turned the paint metal instead (README, "Three albedo priors").
     shared_albedo: float = 0.0
     light_seen: float = 0.2
     light_smooth: float = 0.02
     # The fitted light's colour held neutral where no photo saw it (PanoramaLighting.neutrality_loss).
-    # Off (README: its worth).
+    # Off: measured worse on three of the four synthetic objects, whose unseen skies are not grey (README).
     light_neutral: float = 0.0
 
     def to_dict(self) -> dict:
