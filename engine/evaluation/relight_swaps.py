@@ -78,22 +78,21 @@ def swapped_images(export, truth, tables, directions: np.ndarray, supersample: i
     # Detail as a ratio to the coarse colour, so that swapping it keeps the other's brightness there.
     truth_detail = np.clip(truth.albedo / np.maximum(truth_coarse, 1e-4), 0.0, 4.0)
     export_detail = np.clip(export.albedo / np.maximum(export_coarse, 1e-4), 0.0, 4.0)
+    true_albedo, true_roughness, true_metallic = (mix(export.albedo, truth.albedo), mix(export.roughness, truth.roughness),
+                                                  mix(export.metallic, truth.metallic))
     on_export = lambda albedo, roughness=export.roughness, metallic=export.metallic: _shade_gbuffer(  # noqa: E731
         tables, np.clip(albedo, 0.0, 1.0), roughness, metallic, export.normal, export.mask, directions)
     images = {
         "export": (on_export(export.albedo), export.mask),
-        "truth_albedo": (on_export(mix(export.albedo, truth.albedo)), export.mask),
-        "truth_materials": (on_export(mix(export.albedo, truth.albedo), mix(export.roughness, truth.roughness),
-                                      mix(export.metallic, truth.metallic)), export.mask),
+        "truth_albedo": (on_export(true_albedo), export.mask),
+        "truth_materials": (on_export(true_albedo, true_roughness, true_metallic), export.mask),
         "truth_geometry": (_shade_gbuffer(tables, mix(truth.albedo, export.albedo), mix(truth.roughness, export.roughness),
                                           mix(truth.metallic, export.metallic), truth.normal, truth.mask, directions), truth.mask),
         "truth_albedo_detail": (on_export(mix(export.albedo, export_coarse * truth_detail)), export.mask),
         "truth_albedo_coarse": (on_export(mix(export.albedo, truth_coarse * export_detail)), export.mask),
-        "truth_roughness": (on_export(export.albedo, mix(export.roughness, truth.roughness)), export.mask),
-        "truth_albedo_roughness": (on_export(mix(export.albedo, truth.albedo), mix(export.roughness, truth.roughness)),
-                                   export.mask),
-        "truth_albedo_metallic": (on_export(mix(export.albedo, truth.albedo), export.roughness,
-                                            mix(export.metallic, truth.metallic)), export.mask),
+        "truth_roughness": (on_export(export.albedo, true_roughness), export.mask),
+        "truth_albedo_roughness": (on_export(true_albedo, true_roughness), export.mask),
+        "truth_albedo_metallic": (on_export(true_albedo, export.roughness, true_metallic), export.mask),
     }
     return {name: (box_downsample(image, supersample), box_downsample(coverage[..., None], supersample)[..., 0])
             for name, (image, coverage) in images.items()}

@@ -38,11 +38,16 @@ def shared_material_loss(albedo: torch.Tensor, roughness: torch.Tensor, metallic
                          sigma: float = ALBEDO_SIGMA) -> torch.Tensor:
     """(N, 3), (N,), (N,) at surface points -> the mean squared distance of each point's roughness and
     metallic to those of its paint (like_albedo_targets); without `metallic`, of the roughness only."""
-    if albedo.shape[0] < 2:
-        return roughness.new_zeros(())
     materials = torch.stack([roughness] + ([] if metallic is None else [metallic]), dim=-1)
-    targets = like_albedo_targets(albedo, materials, sigma)
-    return ((materials - targets) ** 2).sum(-1).mean()
+    return _spread_within_paints(albedo, materials, sigma)
+
+
+def _spread_within_paints(albedo: torch.Tensor, values: torch.Tensor, sigma: float) -> torch.Tensor:
+    """(N, 3) albedo, (N, C) values -> the mean squared distance of each point's values to its paint's
+    (like_albedo_targets); 0 for fewer than two points."""
+    if albedo.shape[0] < 2:
+        return values.new_zeros(())
+    return ((values - like_albedo_targets(albedo, values, sigma)) ** 2).sum(-1).mean()
 
 
 def shared_albedo_loss(albedo: torch.Tensor, sigma: float = ALBEDO_SIGMA) -> torch.Tensor:
@@ -51,6 +56,4 @@ def shared_albedo_loss(albedo: torch.Tensor, sigma: float = ALBEDO_SIGMA) -> tor
     is pulled flat, so a slow change of brightness over it (shading that a wrong light left there)
     must be explained by the light and the surface instead; another paint, a kernel width away or
     more, is not pulled."""
-    if albedo.shape[0] < 2:
-        return albedo.new_zeros(())
-    return ((albedo - like_albedo_targets(albedo, albedo, sigma)) ** 2).sum(-1).mean()
+    return _spread_within_paints(albedo, albedo, sigma)

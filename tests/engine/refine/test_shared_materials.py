@@ -1,6 +1,6 @@
 import torch
 
-from lirm.engine.refine.shared_materials import like_albedo_targets, shared_material_loss
+from lirm.engine.refine.shared_materials import like_albedo_targets, shared_albedo_loss, shared_material_loss
 
 
 def _two_paints(count: int = 400) -> torch.Tensor:
@@ -71,8 +71,6 @@ def test_the_kernel_width_says_which_albedos_are_one_paint():
 def test_the_shared_albedo_flattens_shading_within_a_paint_and_keeps_the_paints_apart():
     """A cream paint with a slow shading ramp left in it (0.70 to 0.76) and a red one: under the term
     alone the ramp flattens toward the cream's mean, and the red stays red."""
-    from lirm.engine.refine.shared_materials import shared_albedo_loss
-
     ramp = torch.linspace(0.0, 0.06, 200)[:, None]
     cream = torch.tensor([0.70, 0.60, 0.45]) + ramp
     red = torch.tensor([0.6, 0.05, 0.04]).repeat(200, 1)
