@@ -86,11 +86,11 @@ def budget_label(minutes: float | None, config: RefineConfig) -> str:
 
 
 def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfig, base: RefineConfig, minutes: list[float | None],
-                     init: str, progress=None, pictures: Path | None = None, true_lighting: bool = False,
+                     init: str, progress=None, pictures: Path | None = None, lighting_source: str = "estimate",
                      texture_fit: str = "on", swap_study: bool = False, variant_fit: TextureFitConfig | None = None) -> dict:
     """With base.inverse_rendering, also the material and relighting scores (and, with `pictures`,
-    the relighting test's pictures there); `true_lighting`: the oracle lit by the inputs' true
-    environment instead of the estimate from their backgrounds; `texture_fit`: "on", the relighting
+    the relighting test's pictures there); `lighting_source` (refined_rows.LIGHTING_SOURCES): the
+    estimate from the inputs' backgrounds, or an oracle lit by their true environment; `texture_fit`: "on", the relighting
     test's export fits its textures to the input photos (RelightConfig.fit_textures), "off", "both"
     (the baked export scored too, under baked_ keys) or "variant" (the fit with the settings
     `variant_fit` scored too, under variant_ keys; both fits' seconds as fit_seconds); `swap_study`:
@@ -127,7 +127,7 @@ def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfi
                 relighter.row = f"{init} {label}"
             release_memory(meter.device)
             meter.reset()
-            rows = per_object_scores(model, objects, eval_config, config, init, relighter, true_lighting)
+            rows = per_object_scores(model, objects, eval_config, config, init, relighter, lighting_source)
             budgets.append({"minutes": budget, "budget": label, "peak_bytes": meter.peak(), "objects": rows, **{key: mean_of(rows, key) for key in keys}})
         if progress:
             progress("done", len(minutes), len(minutes))
@@ -135,7 +135,7 @@ def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfi
         if relighter is not None:
             relighter.release()
     variant = {"variant_fit": asdict(variant_fit)} if texture_fit == "variant" and variant_fit is not None else {}
-    return {"init": init, "lighting": "truth" if true_lighting else "estimate", "texture_fit": texture_fit, **variant,
+    return {"init": init, "lighting": lighting_source, "texture_fit": texture_fit, **variant,
             "settings": base.to_dict(),
             "machine": machine_facts(base.device),
             "memory_method": meter.method, "budgets": budgets}
@@ -143,7 +143,8 @@ def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfi
 
 def refine_bench_table(result: dict, set_name: str) -> str:
     first = result["budgets"][0]["objects"] if result["budgets"] else []
-    lit = " under the inputs' true lighting (oracle)" if result.get("lighting") == "truth" else ""
+    lit = {"truth": " under the inputs' true lighting (oracle)",
+           "truth-panorama": " under the inputs' true lighting as the fit's own panorama, held (oracle)"}.get(result.get("lighting"), "")
     lines = [f"Refinement from {result['init']}{lit} on the {set_name} set, {len(first)} objects "
              f"({', '.join(r['object'] for r in first)}); means over objects:", "",
              "| budget | PSNR ↑ | SSIM ↑ | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ | CD ↓ | steps | seconds "

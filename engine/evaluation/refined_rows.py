@@ -27,6 +27,11 @@ from lirm.engine.refine.refiner import refine_field
 from .evaluate import EvalConfig, EvalResult, lighting_of, model_device, model_inputs, score_field, update_scores
 from .heldout_sets import HeldoutObject
 
+# What a held-out object's inverse rendering shades with: the capture-style estimate from the inputs'
+# backgrounds (what a user has), or an oracle knowing the environment that really lit the inputs, as
+# the renderer's own tables ("truth") or area-averaged into the fit's own panorama ("truth-panorama").
+LIGHTING_SOURCES = ("estimate", "truth", "truth-panorama")
+
 Progress = Callable[[str, int, int], None]
 
 
@@ -61,9 +66,10 @@ class RefinedObject:
     start: str = ""  # where the fit started: the init asked for, or the one "auto" chose
 
 
-def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig, init: str, true_lighting=None) -> RefinedObject:
-    """One held-out object refined. `true_lighting` (a PBRRenderer): inverse-render under the inputs'
-    true environment instead of the estimate (an oracle)."""
+def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig, init: str, true_lighting=None,
+                  lighting_source: str = "estimate") -> RefinedObject:
+    """One held-out object refined. `lighting_source` (LIGHTING_SOURCES): what the inverse rendering
+    shades with; "truth" needs `true_lighting`, a PBRRenderer whose tables it reads."""
     sets = obj.protocol.input_sets[:updates]
     views = refine_inputs(obj, [i for s in sets for i in s])
     start = time.perf_counter()
@@ -94,8 +100,16 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
         raise ValueError(f"unknown init {init!r}")
     lighting = None
     if refine.inverse_rendering:
-        lighting = (oracle_lighting(obj, true_lighting) if true_lighting is not None
-                    else input_lighting(obj, [i for s in sets for i in s], refine))
+        if lighting_source == "truth":
+            if true_lighting is None:
+                raise ValueError("the oracle lighting reads the renderer's tables: pass its PBRRenderer as true_lighting")
+            lighting = oracle_lighting(obj, true_lighting)
+        elif lighting_source == "truth-panorama":
+            lighting = true_panorama_lighting(obj, refine)
+        elif lighting_source == "estimate":
+            lighting = input_lighting(obj, [i for s in sets for i in s], refine)
+        else:
+            raise ValueError(f"unknown lighting source {lighting_source!r}; choose one of: {', '.join(LIGHTING_SOURCES)}")
     result = refine_field(refinable, views, refine, grid, lighting=lighting, start_has_materials=chosen in ("lirm", "hull-lirm", "hull-lirm-footprint"))
     return RefinedObject(result.field.frozen_field(), time.perf_counter() - start, result.steps, views, result.lighting, chosen)
 
@@ -114,6 +128,31 @@ def input_lighting(obj: HeldoutObject, indices: list[int], refine: RefineConfig)
     estimate = estimate_capture_lighting(images, masks, cameras, CaptureLightingConfig(proxy_radius=50.0))
     return PanoramaLighting.from_capture_lighting(estimate, refine.lighting_height, refine.lighting_sharpest_lobe,
                                                   refine.light_lobes, refine.lighting_smooth_scale)
+
+
+def true_environment_in_world(obj: HeldoutObject):
+    """The environment that lit the inputs as the scene's world sees it: turned by its rotation and
+    scaled by its exposure, as the renderer applies them (an Environment in the world frame)."""
+    from lirm.renderer.environment import Environment, rotation_about_z
+
+    if obj.input_light is None:
+        raise ValueError(f"{obj.name}: the light of its inputs is unknown (a real capture): no oracle lighting")
+    environment, rotation_deg, exposure_ev = obj.input_light
+    directions, _ = environment.texel_directions()
+    local = directions.reshape(-1, 3) @ rotation_about_z(-rotation_deg).T  # world -> environment frame
+    radiance = environment.lookup(local).reshape(environment.radiance.shape) * 2.0 ** exposure_ev
+    return Environment(radiance.astype(np.float32), name=f"{environment.name} (world frame)")
+
+
+def true_panorama_lighting(obj: HeldoutObject, refine: RefineConfig):
+    """The oracle in the fit's own terms: the true environment area-averaged into the fitted
+    panorama's texels (no compact lights) and held fixed. Against `oracle_lighting` it says what the
+    panorama costs as a representation; against the estimate, what the estimate's content costs."""
+    from lirm.engine.lighting.panorama_lighting import PanoramaLighting
+
+    panorama = PanoramaLighting.from_environment(true_environment_in_world(obj), refine.lighting_height,
+                                                 refine.lighting_sharpest_lobe, 0, refine.lighting_smooth_scale)
+    return panorama.requires_grad_(False)
 
 
 def oracle_lighting(obj: HeldoutObject, renderer):
@@ -155,14 +194,14 @@ MATERIAL_KEYS = ("roughness_psnr", "metallic_psnr") + RELIGHT_KEYS
 
 
 def per_object_scores(model, objects: list[HeldoutObject], config: EvalConfig, refine: RefineConfig, init: str,
-                      relighter=None, true_lighting: bool = False) -> list[dict]:
+                      relighter=None, lighting_source: str = "estimate") -> list[dict]:
     """One dict per object (for studies that pair objects across settings); with a `relighter`, the
-    material and relighting scores too; with `true_lighting` (and the relighter's renderer), the
-    oracle that knows the inputs' environment."""
+    material and relighting scores too; `lighting_source` other than "estimate" (LIGHTING_SOURCES):
+    an oracle that knows the inputs' environment ("truth" reads the relighter's renderer's tables)."""
     rows = []
     for obj in objects:
-        oracle = relighter.renderer if true_lighting and relighter is not None else None
-        refined = refine_object(model, obj, config.updates, refine, init, oracle)
+        oracle = relighter.renderer if lighting_source == "truth" and relighter is not None else None
+        refined = refine_object(model, obj, config.updates, refine, init, oracle, lighting_source)
         outputs = obj.protocol.outputs[:config.output_views] if config.output_views else obj.protocol.outputs
         scores: dict[str, list[float]] = {}
         with torch.no_grad():

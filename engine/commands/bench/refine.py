@@ -36,9 +36,11 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--materials", action="store_true", help="inverse-render the materials (as `lirm refine --materials`) "
                         "and also score roughness, metallic and the relighting test")
     parser.add_argument("--pictures", type=Path, help="with --materials: the relighting test's pictures, per budget and object")
-    parser.add_argument("--lighting", choices=("estimate", "truth"), default="estimate",
+    parser.add_argument("--lighting", choices=("estimate", "truth", "truth-panorama"), default="estimate",
                         help="with --materials: inverse-render under the capture-style estimate from the inputs' backgrounds "
-                             "(default), or under the environment that really lit them (an oracle: what the estimate costs)")
+                             "(default), or under the environment that really lit them (an oracle: what the estimate costs): "
+                             "as the renderer's own tables (truth), or area-averaged into the fit's own 16 x 32 panorama "
+                             "and held (truth-panorama: what the panorama costs as a representation)")
     parser.add_argument("--texture-fit", choices=("on", "off", "both", "variant"), default="on",
                         help="with --materials: the relighting test's export fits its textures to the input photos (on, as "
                              "`lirm export` does for a capture refined with materials), keeps the field's baked ones (off), "
@@ -63,8 +65,8 @@ def run(args: argparse.Namespace) -> int:
     require_at_least_one(args, "objects", "output_views")
     if args.pictures and not args.materials:
         raise LirmUsageError("--pictures shows the relighting test, which only --materials runs; add --materials")
-    if args.lighting == "truth" and not args.materials:
-        raise LirmUsageError("--lighting truth lights the inverse rendering, which only --materials runs; add --materials")
+    if args.lighting != "estimate" and not args.materials:
+        raise LirmUsageError(f"--lighting {args.lighting} lights the inverse rendering, which only --materials runs; add --materials")
     if args.texture_fit != "on" and not args.materials:
         raise LirmUsageError("--texture-fit changes the relighting test's export, which only --materials runs; add --materials")
     if (args.texture_fit == "variant") != bool(args.fit_option):
@@ -74,8 +76,8 @@ def run(args: argparse.Namespace) -> int:
     if args.swap_study and (not args.materials or args.warm_start):
         raise LirmUsageError("--swap-study takes apart the relighting test, which only --materials runs (and not with "
                              "--warm-start); add --materials")
-    if args.lighting == "truth" and args.warm_start:
-        raise LirmUsageError("--lighting truth is for the budget table, not --warm-start")
+    if args.lighting != "estimate" and args.warm_start:
+        raise LirmUsageError(f"--lighting {args.lighting} is for the budget table, not --warm-start")
     require_range(args, "size", VIEW_SIZE, " pixels")
     if args.steps is not None and (args.steps < 1 or args.warm_start):
         raise LirmUsageError(f"--steps must be at least 1 (and is for the budget table, not --warm-start), got {args.steps}")
@@ -103,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             result = run_refine_bench(source.model, objects, EvalConfig(output_views=args.output_views), base, budgets,
                                       args.init, progress=bar_updater(bar), pictures=args.pictures,
-                                      true_lighting=args.lighting == "truth", texture_fit=args.texture_fit,
+                                      lighting_source=args.lighting, texture_fit=args.texture_fit,
                                       swap_study=args.swap_study,
                                       variant_fit=variant)
         finally:

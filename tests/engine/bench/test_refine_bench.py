@@ -56,8 +56,9 @@ def test_bench_refine_variant_needs_its_settings_and_they_must_exist(capsys):
 
 
 def test_bench_refine_true_lighting_needs_materials(capsys):
-    assert main(["bench", "refine", "--objects", "1", "--lighting", "truth"]) == 2
-    assert "add --materials" in capsys.readouterr().err
+    for source in ("truth", "truth-panorama"):
+        assert main(["bench", "refine", "--objects", "1", "--lighting", source]) == 2
+        assert f"--lighting {source} lights the inverse rendering" in capsys.readouterr().err
 
 
 def test_bench_refine_swap_study_needs_materials(capsys):
