@@ -55,6 +55,13 @@ def hardware_description(info: ProcessGroupInfo) -> str:
             f"{torch.get_num_threads()} torch threads")
 
 
+def finish_together(info: ProcessGroupInfo) -> None:
+    """Wait until every process has finished its work (call on the normal path only: after an error the
+    other ranks may never arrive)."""
+    if info.distributed and dist.is_initialized():
+        dist.barrier()
+
+
 def shutdown(info: ProcessGroupInfo) -> None:
     if info.distributed and dist.is_initialized():
         dist.destroy_process_group()

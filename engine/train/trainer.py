@@ -41,7 +41,8 @@ from lirm.engine.model.lirm import LIRM
 from lirm.engine.model.occupancy_grid import OccupancyConfig
 from lirm.engine.synth.training_scenes import GENERATOR_VERSION, TrainingSceneConfig
 
-from .distributed import ProcessGroupInfo, any_process, hardware_description, init_process_group, mean_over_processes, shutdown
+from .distributed import (ProcessGroupInfo, any_process, finish_together, hardware_description, init_process_group,
+                          mean_over_processes, shutdown)
 from .losses import LossWeights
 from .objective import TrainingObjective
 from .perceptual import perceptual_loss
@@ -222,7 +223,11 @@ def run_training(config: TrainConfig, progress: Callable[[dict], None] | None = 
                  cancel: Callable[[], bool] | None = None) -> TrainResult:
     info = init_process_group(config.device)
     try:
-        return _train(config, info, progress, cancel)
+        result = _train(config, info, progress, cancel)
+        # Every rank done before any tears its connections down: a rank that destroyed the group while
+        # another still wrote its last checkpoint aborted in gloo's teardown once in CI (2026-12-05).
+        finish_together(info)
+        return result
     finally:
         shutdown(info)
 
