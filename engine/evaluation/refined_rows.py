@@ -130,14 +130,19 @@ def input_lighting(obj: HeldoutObject, indices: list[int], refine: RefineConfig)
                                                   refine.light_lobes, refine.lighting_smooth_scale)
 
 
+def _input_light(obj: HeldoutObject) -> tuple:
+    """(environment, rotation_deg, exposure_ev) that lit the inputs: what every oracle starts from."""
+    if obj.input_light is None:
+        raise ValueError(f"{obj.name}: the light of its inputs is unknown (a real capture): no oracle lighting")
+    return obj.input_light
+
+
 def true_environment_in_world(obj: HeldoutObject):
     """The environment that lit the inputs as the scene's world sees it: turned by its rotation and
     scaled by its exposure, as the renderer applies them (an Environment in the world frame)."""
     from lirm.renderer.environment import Environment, rotation_about_z
 
-    if obj.input_light is None:
-        raise ValueError(f"{obj.name}: the light of its inputs is unknown (a real capture): no oracle lighting")
-    environment, rotation_deg, exposure_ev = obj.input_light
+    environment, rotation_deg, exposure_ev = _input_light(obj)
     directions, _ = environment.texel_directions()
     local = directions.reshape(-1, 3) @ rotation_about_z(-rotation_deg).T  # world -> environment frame
     radiance = environment.lookup(local).reshape(environment.radiance.shape) * 2.0 ** exposure_ev
@@ -160,9 +165,7 @@ def oracle_lighting(obj: HeldoutObject, renderer):
     from lirm.engine.lighting.fixed_lighting import FixedLighting
     from lirm.engine.lighting.lighting_tables import tables_from_lighting
 
-    if obj.input_light is None:
-        raise ValueError(f"{obj.name}: the light of its inputs is unknown (a real capture): no oracle lighting")
-    environment, rotation_deg, exposure_ev = obj.input_light
+    environment, rotation_deg, exposure_ev = _input_light(obj)
     lighting = renderer.prepare_lighting(environment, rotation_deg=rotation_deg, intensity_ev=exposure_ev)
     try:
         return FixedLighting(tables_from_lighting(renderer, lighting))
