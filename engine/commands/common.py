@@ -146,7 +146,8 @@ def heldout_objects(args: argparse.Namespace):
     renderer = PBRRenderer(ctx)
     try:
         if args.set == "synthetic":
-            return synthetic_heldout(renderer, args.objects, args.size, relight_gbuffers=getattr(args, "swap_study", False))
+            return synthetic_heldout(renderer, args.objects, args.size, relight_gbuffers=getattr(args, "swap_study", False),
+                                     first=getattr(args, "first_object", 0))
         models, envs = scan_model_folder(args.models), scan_environment_folder(args.environments)
         for scan, what in ((models, "glTF models"), (envs, "environments")):
             if scan.problems:

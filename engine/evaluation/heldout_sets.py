@@ -95,17 +95,23 @@ def _render_object(renderer: PBRRenderer, name: str, model: LoadedModel, environ
 
 
 def synthetic_heldout(renderer: PBRRenderer, count: int = 8, size: int = 128, seed: int = 0,
-                      surface_points: int = 20_000, relight_gbuffers: bool = False) -> list[HeldoutObject]:
-    """`relight_gbuffers`: keep the relighting truth's G-buffers (the swap study)."""
+                      surface_points: int = 20_000, relight_gbuffers: bool = False, first: int = 0) -> list[HeldoutObject]:
+    """Objects `first` .. `first + count - 1` of the set; `relight_gbuffers`: keep the relighting truth's
+    G-buffers (the swap study). Every object is the same whatever `first` (the set's draws are made for
+    the objects before it too), so objects beyond the ones a setting was chosen on can be scored alone."""
+    if first < 0:
+        raise ValueError(f"the first object's index must be at least 0, got {first}")
     config = ProtocolConfig(size=size, seed=seed)
     rng = np.random.default_rng([seed, 2024])
     environments = list(PROCEDURAL_ENVIRONMENTS)
     objects = []
-    for i in range(count):
+    for i in range(first + count):
         name = BUILTIN_OBJECTS[i % len(BUILTIN_OBJECTS)]
         variant = HELDOUT_VARIANT_BASE + seed * 10_000 + i
         env_name = environments[i % len(environments)]
         rotation, turn = float(rng.uniform(0, 360)), float(rng.uniform(0, 360))
+        if i < first:
+            continue
         model = resolve_asset(name, seed=variant)
         env = resolve_environment(env_name, width=512)
         # Drawn after the set's original draws, so that adding the relighting changed no object.

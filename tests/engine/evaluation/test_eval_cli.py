@@ -37,6 +37,19 @@ def test_heldout_set_is_fixed_and_disjoint_from_inputs(renderer):
         assert obj.surface.shape == (100, 3) and abs(obj.surface).max() <= 0.8 + 1e-4
 
 
+def test_later_objects_alone_are_the_same_objects(renderer):
+    whole = synthetic_heldout(renderer, 3, 32, surface_points=100)
+    alone = synthetic_heldout(renderer, 1, 32, surface_points=100, first=2)
+    assert [o.name for o in alone] == ["toy_block#2"]
+    assert alone[0].lit_by == whole[2].lit_by
+    assert (alone[0].views.image == whole[2].views.image).all()
+    assert alone[0].relight.rotation_deg == whole[2].relight.rotation_deg
+    for view, radiance in whole[2].relight.radiance.items():
+        assert (alone[0].relight.radiance[view] == radiance).all()
+    with pytest.raises(ValueError, match="at least 0"):
+        synthetic_heldout(renderer, 1, 32, first=-1)
+
+
 def test_eval_scores_every_update(renderer):
     objects = synthetic_heldout(renderer, 1, 32, surface_points=500)
     config = EvalConfig(render=VolumeRenderConfig(samples_per_ray=32, numerical_normals=False), mesh_resolution=24,
