@@ -12,6 +12,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 FOLDERS = {"app": "lirm.app", "engine": "lirm.engine", "renderer": "lirm.renderer", "resources": "lirm.resources"}
+DATA_PACKAGES = {"lirm.renderer.shaders", "lirm.resources.checkpoints"}  # folders of data files only, listed so that setuptools installs them
 
 
 def test_every_code_folder_is_listed_as_a_package():
@@ -22,6 +23,10 @@ def test_every_code_folder_is_listed_as_a_package():
         for init in (REPO / folder).rglob("__init__.py"):
             rel = init.parent.relative_to(REPO / folder)
             found.add(".".join([package, *rel.parts]))
+    for package in DATA_PACKAGES:
+        folder, *rest = package.split(".")[1:]
+        assert (REPO / folder).joinpath(*rest).is_dir() and not (REPO / folder).joinpath(*rest, "__init__.py").exists(), package
+    found |= DATA_PACKAGES
     assert found == listed, f"pyproject.toml packages differ from the folders: missing {found - listed}, stale {listed - found}"
 
 
@@ -37,6 +42,8 @@ def test_wheel_contains_only_the_lirm_namespace_with_its_shaders(tmp_path):
     assert tops == {"lirm", next(t for t in tops if t.endswith(".dist-info"))}, tops
     assert "lirm/renderer/shaders/mesh_pbr.frag" in names
     assert "lirm/engine/cli.py" in names
+    assert "lirm/resources/checkpoints/lirm-tiny.safetensors" in names  # the shipped weights
+    assert not [n for n in names if n.endswith("-resume.safetensors") or "training-logs" in n]  # weights in training stay out
     entry_points = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith("entry_points.txt"))).decode()
     assert "lirm = lirm.engine.cli:main" in entry_points
 
@@ -51,7 +58,10 @@ def test_plain_install_imports_and_finds_its_shaders(tmp_path):
     assert not any((target / name).exists() for name in FOLDERS), "a bare app/engine/renderer landed in site-packages"
     code = (
         "import lirm.renderer.shader_source as s, lirm.engine.cli, lirm.app, lirm.resources;"
-        "assert 'vec3' in s.shader_source('mesh_pbr.frag'); print(s.SHADER_DIR)"
+        "assert 'vec3' in s.shader_source('mesh_pbr.frag');"
+        "from lirm.engine.model.pretrained import shipped_checkpoint;"
+        "assert shipped_checkpoint('tiny') is not None and shipped_checkpoint('small') is None;"
+        "print(s.SHADER_DIR)"
     )
     out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True, cwd=tmp_path,
                          env={"PYTHONPATH": str(target), "PATH": "/usr/bin:/bin"})
