@@ -135,6 +135,8 @@ def heldout_objects(args: argparse.Namespace):
     from lirm.renderer.context import create_headless_context
     from lirm.renderer.pbr_renderer import PBRRenderer
 
+    if getattr(args, "first_object", 0) and args.set != "synthetic":
+        raise LirmUsageError(f"--first-object picks objects of the synthetic set; --set {args.set} takes all of its objects")
     if args.set not in ("synthetic", "gltf"):
         capture = Path(args.set)
         if not capture.exists():

@@ -93,6 +93,13 @@ def test_eval_and_bench_sizes_out_of_range(capsys):
     assert code == 2 and "--size must be between" in one_sentence(err) and "lirm bench trajectory --help" in err
 
 
+def test_first_object_out_of_range_or_on_another_set(capsys):
+    code, err = run(capsys, "bench", "refine", "--first-object", "-1")
+    assert code == 2 and "--first-object must be between 0 and" in one_sentence(err)
+    code, err = run(capsys, "eval", "--set", "gltf", "--first-object", "2")
+    assert code == 2 and "--first-object picks objects of the synthetic set" in one_sentence(err)
+
+
 def test_demo_refinement_minutes_below_zero(capsys, tmp_path):
     code, err = run(capsys, "demo", "-o", str(tmp_path / "demo"), "--refine-minutes", "-1")
     assert code == 2 and "--refine-minutes must be 0 or more" in one_sentence(err)
