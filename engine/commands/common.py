@@ -86,6 +86,19 @@ def check_export_memory(args: argparse.Namespace) -> None:
     check_memory(args, [("--grid", EXPORT_GRID, mesh_grid_bytes), ("--texture", TEXTURE, bake_bytes)], together=False)
 
 
+def add_first_object_argument(parser: argparse.ArgumentParser) -> None:
+    """`--first-object K` (lirm eval, lirm bench refine); check_first_object refuses what it cannot mean."""
+    parser.add_argument("--first-object", type=int, default=0, metavar="K",
+                        help="the synthetic set's objects K .. K + N - 1 (default 0); the defaults were chosen on objects 0-3, "
+                             "so objects from 4 on say whether a setting holds beyond them")
+
+
+def check_first_object(args: argparse.Namespace) -> None:
+    require_range(args, "first_object", (0, 10_000))
+    if args.first_object and args.set != "synthetic":
+        raise LirmUsageError(f"--first-object picks objects of the synthetic set; --set {args.set} takes all of its objects")
+
+
 def check_output(path: Path, what: str, **kwargs) -> None:
     from ..io.output_paths import check_writable_output
 
@@ -135,8 +148,6 @@ def heldout_objects(args: argparse.Namespace):
     from lirm.renderer.context import create_headless_context
     from lirm.renderer.pbr_renderer import PBRRenderer
 
-    if getattr(args, "first_object", 0) and args.set != "synthetic":
-        raise LirmUsageError(f"--first-object picks objects of the synthetic set; --set {args.set} takes all of its objects")
     if args.set not in ("synthetic", "gltf"):
         capture = Path(args.set)
         if not capture.exists():

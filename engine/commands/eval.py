@@ -6,8 +6,8 @@ import argparse
 from pathlib import Path
 
 from ..errors import LirmUsageError
-from .common import (MESH_RESOLUTION, VIEW_SIZE, bar_updater, heldout_objects, model_with_warning, require_at_least_one,
-                     require_range, view_progress_bar)
+from .common import (MESH_RESOLUTION, VIEW_SIZE, add_first_object_argument, bar_updater, check_first_object, heldout_objects,
+                     model_with_warning, require_at_least_one, require_range, view_progress_bar)
 
 
 def add_parser(subparsers) -> None:
@@ -15,9 +15,7 @@ def add_parser(subparsers) -> None:
     parser.add_argument("checkpoint", type=Path, nargs="?", help="model weights (.safetensors), e.g. a training checkpoint (default: the shipped checkpoint)")
     parser.add_argument("--set", default="synthetic", help="synthetic (default), gltf, or a capture folder")
     parser.add_argument("--objects", type=int, default=4, help="objects of the synthetic set (default 4)")
-    parser.add_argument("--first-object", type=int, default=0, metavar="K",
-                        help="the synthetic set's objects K .. K + N - 1 (default 0); the defaults were chosen on objects 0-3, "
-                             "so objects from 4 on say whether a setting holds beyond them")
+    add_first_object_argument(parser)
     parser.add_argument("--size", type=int, default=128, help="side of the protocol views in pixels (default 128)")
     parser.add_argument("--updates", type=int, default=4, help="updates to score (default 4)")
     parser.add_argument("--output-views", type=int, help="score at most this many output views per object (default: all 12)")
@@ -53,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     if args.pictures and args.no_relight:
         raise LirmUsageError("--pictures shows the relighting test, which --no-relight skips; leave one of them out")
     require_range(args, "size", VIEW_SIZE, " pixels")
-    require_range(args, "first_object", (0, 10_000))
+    check_first_object(args)
     require_range(args, "mesh_resolution", MESH_RESOLUTION, " samples per side")
     source = model_with_warning(args.checkpoint)
     model = source.model

@@ -7,8 +7,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from ...errors import LirmUsageError
-from ..common import (VIEW_SIZE, bar_updater, heldout_objects, model_with_warning, require_at_least_one, require_range,
-                      view_progress_bar)
+from ..common import (VIEW_SIZE, add_first_object_argument, bar_updater, check_first_object, heldout_objects, model_with_warning,
+                      require_at_least_one, require_range, view_progress_bar)
 
 
 def add_parser(subparsers) -> None:
@@ -16,9 +16,7 @@ def add_parser(subparsers) -> None:
     parser.add_argument("checkpoint", type=Path, nargs="?", help="model weights (default: the shipped checkpoint)")
     parser.add_argument("--set", choices=("synthetic", "gltf"), default="synthetic", help="held-out set (default synthetic)")
     parser.add_argument("--objects", type=int, default=4, help="held-out synthetic objects (default 4)")
-    parser.add_argument("--first-object", type=int, default=0, metavar="K",
-                        help="the synthetic set's objects K .. K + N - 1 (default 0); the defaults were chosen on objects 0-3, "
-                             "so objects from 4 on say whether a setting holds beyond them")
+    add_first_object_argument(parser)
     parser.add_argument("--size", type=int, default=128, help="side of the protocol views and of the input crops (default 128)")
     parser.add_argument("--output-views", type=int, default=6, help="output views scored per object (default 6 of 12)")
     parser.add_argument("--minutes", type=float, nargs="+", default=[0.5, 1.0, 3.0, 10.0], help="budgets (default 0.5 1 3 10)")
@@ -82,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     if args.lighting != "estimate" and args.warm_start:
         raise LirmUsageError(f"--lighting {args.lighting} is for the budget table, not --warm-start")
     require_range(args, "size", VIEW_SIZE, " pixels")
-    require_range(args, "first_object", (0, 10_000))
+    check_first_object(args)
     if args.steps is not None and (args.steps < 1 or args.warm_start):
         raise LirmUsageError(f"--steps must be at least 1 (and is for the budget table, not --warm-start), got {args.steps}")
     if any(not m > 0 for m in args.minutes):
