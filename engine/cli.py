@@ -13,12 +13,12 @@ from pathlib import Path
 from lirm.renderer.context import GLContextError
 
 from . import progress_events
-from .commands import app, bench, capture, curve, demo, export, reconstruct, refine, render, ship, suggest, train
+from .commands import app, bench, capture, curve, demo, export, fetch, reconstruct, refine, render, ship, suggest, train
 from .commands import eval as eval_
 from .errors import LirmResourceError, LirmUsageError, LirmUserError
 
 # The commands in the order `lirm --help` lists them; each is a module of engine/commands/.
-COMMANDS = (app, demo, render, capture, reconstruct, refine, export, suggest, train, curve, eval_, ship, bench)
+COMMANDS = (app, demo, render, capture, reconstruct, refine, export, suggest, train, curve, eval_, ship, bench, fetch)
 
 # Exit codes (README "Exit codes"): what went wrong, for scripts and for the app's background jobs.
 EXIT_OK = 0  # done
@@ -128,10 +128,10 @@ def _write_crash_report(argv: list[str]) -> Path | None:
         lirm_version = "unknown"
     text = (f"lirm {lirm_version}, Python {platform.python_version()} on {platform.platform()}\n"
             f"command: lirm {' '.join(argv)}\ntime: {time.strftime('%Y-%m-%d %H:%M:%S')}\n\n{traceback.format_exc()}")
-    cache = os.environ.get("XDG_CACHE_HOME")
-    cache = Path(cache) if cache and Path(cache).is_absolute() else Path.home() / ".cache"
+    from .io.user_cache import user_cache_folder
+
     stamp = f"crash-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
-    for folder in (cache / "lirm", Path(tempfile.gettempdir()) / "lirm"):
+    for folder in (user_cache_folder(), Path(tempfile.gettempdir()) / "lirm"):
         try:
             folder.mkdir(parents=True, exist_ok=True)
             for n in range(100):  # never overwrite an earlier report

@@ -114,8 +114,8 @@ def run_refine_bench(model, objects: list[HeldoutObject], eval_config: EvalConfi
                               pictures=pictures)
     paired = {"both": "baked_", "variant": "variant_"}.get(texture_fit)
     timed = ("fit_seconds",) + (("variant_fit_seconds",) if texture_fit == "variant" else ()) if texture_fit != "off" else ()
-    keys = ("psnr", "ssim", "albedo_psnr", "roughness_psnr", "metallic_psnr", "chamfer", "seconds", "steps") + (
-        RELIGHT_KEYS + timed if relighter else ()) + (tuple(f"{paired}{k}" for k in RELIGHT_KEYS) if paired else ()) + (
+    keys = ("psnr", "ssim", "lpips", "albedo_psnr", "roughness_psnr", "metallic_psnr", "chamfer", "seconds", "steps") + (
+        RELIGHT_KEYS + ("relight_lpips",) + timed if relighter else ()) + (tuple(f"{paired}{k}" for k in RELIGHT_KEYS) if paired else ()) + (
         SWAP_KEYS if swap_study else ())
     try:
         for k, budget in enumerate(minutes):
@@ -147,13 +147,17 @@ def refine_bench_table(result: dict, set_name: str) -> str:
            "truth-panorama": " under the inputs' true lighting as the fit's own panorama, held (oracle)"}.get(result.get("lighting"), "")
     lines = [f"Refinement from {result['init']}{lit} on the {set_name} set, {len(first)} objects "
              f"({', '.join(r['object'] for r in first)}); means over objects:", "",
-             "| budget | PSNR ↑ | SSIM ↑ | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ | CD ↓ | steps | seconds "
+             "| budget | PSNR ↑ | SSIM ↑ | LPIPS ↓ | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ | CD ↓ | steps | seconds "
              "| peak memory (GB) |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for b in result["budgets"]:
-        lines.append(f"| {b['budget']} | {b['psnr']:.2f} | {b['ssim']:.3f} | {b['albedo_psnr']:.2f} | {b['roughness_psnr']:.2f} | "
+        lines.append(f"| {b['budget']} | {b['psnr']:.2f} | {b['ssim']:.3f} | {_optional(b.get('lpips'), 3)} | {b['albedo_psnr']:.2f} | {b['roughness_psnr']:.2f} | "
                      f"{b['metallic_psnr']:.2f} | {b['chamfer']:.4f} | {b['steps']:.0f} | {b['seconds']:.0f} | "
                      f"{b['peak_bytes'] / 1e9:.2f} |")
+    if result["budgets"] and _optional(result["budgets"][0].get("lpips"), 3) == "-":
+        from lirm.engine.train.perceptual import lpips_available
+
+        lines += ["", f"LPIPS not computed: {lpips_available('alex')[1] or 'no view was scored'}."]
     if result["budgets"] and "relight_psnr_l" in result["budgets"][0]:
         lines += ["", "The relighting test (materials inverse-rendered):", ""] + _relight_rows(result, "")
         variant = ", ".join(f"{k}={v}" for k, v in _variant_changes(result).items()) or "the default settings"
@@ -181,12 +185,20 @@ def refine_bench_table(result: dict, set_name: str) -> str:
 def _relight_rows(result: dict, prefix: str) -> list[str]:
     """The relighting table's rows of `prefix`-ed scores, with the texture fit's seconds where it ran."""
     timed = f"{prefix}fit_seconds" in result["budgets"][0]
-    lines = ["| budget | relight PSNR-H ↑ | relight PSNR-L ↑ |" + (" texture fit (s) |" if timed else ""),
-             "|---|---|---|" + ("---|" if timed else "")]
+    perceptual = f"{prefix}relight_lpips" in result["budgets"][0]
+    lines = ["| budget | relight PSNR-H ↑ | relight PSNR-L ↑ |" + (" relight LPIPS ↓ |" if perceptual else "")
+             + (" texture fit (s) |" if timed else ""),
+             "|---|---|---|" + ("---|" if perceptual else "") + ("---|" if timed else "")]
     for b in result["budgets"]:
         lines.append(f"| {b['budget']} | {b[prefix + 'relight_psnr_h']:.2f} | {b[prefix + 'relight_psnr_l']:.2f} |"
+                     + (f" {_optional(b[prefix + 'relight_lpips'], 3)} |" if perceptual else "")
                      + (f" {b[prefix + 'fit_seconds']:.1f} |" if timed else ""))
     return lines
+
+
+def _optional(value, digits: int) -> str:
+    """A figure, or "-" where it was not computed (LPIPS without its weights)."""
+    return "-" if value is None or not np.isfinite(value) else f"{value:.{digits}f}"
 
 
 def _variant_changes(result: dict) -> dict:

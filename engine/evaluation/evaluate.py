@@ -1,6 +1,6 @@
-"""The paper's evaluation after each progressive update: novel-view PSNR and SSIM (LPIPS when it
-can run), albedo PSNR with Stanford-ORB's per-channel scale, roughness and metallic PSNR on the
-object's pixels, and the Chamfer distance of the marching-cubes mesh to the true surface.
+"""The paper's evaluation after each progressive update: novel-view PSNR, SSIM and LPIPS (AlexNet,
+when its weights were fetched: `lirm fetch lpips`), albedo PSNR with Stanford-ORB's per-channel
+scale, roughness and metallic PSNR on the object's pixels, and the Chamfer distance of the marching-cubes mesh to the true surface.
 
 The same state is updated with input set 1, 2, 3, 4 in turn; after each update every output view
 is volume-rendered and scored. Numbers are means over output views (images) or objects (Chamfer).
@@ -30,6 +30,7 @@ from .chamfer import chamfer_distance, surface_samples
 from .heldout_sets import HeldoutObject
 
 Progress = Callable[[str, int, int], None]
+METRIC_NETWORK = "alex"  # LPIPS' own default for evaluation (VGG is the training loss's)
 
 
 class ProgressiveReconstructor(Protocol):
@@ -165,14 +166,19 @@ def update_scores(update: int, s: dict[str, list[float]]) -> UpdateScores:
                         _finite_mean(s.get("relight_lpips", [])))
 
 
+def metric_lpips(device="cpu") -> tuple[LPIPSLoss | None, str]:
+    """The LPIPS metric's network, or None and the note saying why it is skipped."""
+    ok, why = lpips_available(METRIC_NETWORK)
+    return (LPIPSLoss(METRIC_NETWORK).to(device), "") if ok else (None, f"LPIPS skipped: {why}")
+
+
 @torch.no_grad()
 def evaluate_heldout(model: ProgressiveReconstructor, objects: list[HeldoutObject], config: EvalConfig = EvalConfig(),
                      set_name: str = "synthetic", progress: Progress | None = None,
                      cancel: Callable[[], bool] | None = None, relighter=None) -> EvalResult:
     device = model_device(model)
     per_update: dict[int, dict[str, list[float]]] = {u: {} for u in range(1, config.updates + 1)}
-    ok, why = lpips_available()
-    lpips_net = LPIPSLoss().to(device) if ok else None
+    lpips_net, lpips_note = metric_lpips(device)
     for k, obj in enumerate(objects):
         if progress:
             progress(f"evaluating {obj.name}", k, len(objects))
@@ -190,7 +196,7 @@ def evaluate_heldout(model: ProgressiveReconstructor, objects: list[HeldoutObjec
             per_update[u].setdefault("seconds", []).append(seconds)
             score_field(decoded, obj, outputs, config, per_update[u], lpips_net, relighter)
     rows = [update_scores(u, s) for u, s in per_update.items() if s]
-    return EvalResult(set_name, [o.name for o in objects], rows, "" if ok else f"LPIPS skipped: {why}", lighting_of(objects))
+    return EvalResult(set_name, [o.name for o in objects], rows, lpips_note, lighting_of(objects))
 
 
 def _mean_or_inf(values: list[float] | None) -> float | None:

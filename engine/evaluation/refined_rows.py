@@ -24,7 +24,7 @@ from lirm.engine.refine.config import RefineConfig
 from lirm.engine.refine.refine_views import RefineViews
 from lirm.engine.refine.refiner import refine_field
 
-from .evaluate import EvalConfig, EvalResult, lighting_of, model_device, model_inputs, score_field, update_scores
+from .evaluate import EvalConfig, EvalResult, lighting_of, metric_lpips, model_device, model_inputs, score_field, update_scores
 from .heldout_sets import HeldoutObject
 
 # What a held-out object's inverse rendering shades with: the capture-style estimate from the inputs'
@@ -176,6 +176,7 @@ def oracle_lighting(obj: HeldoutObject, renderer):
 def evaluate_refined(model, objects: list[HeldoutObject], config: EvalConfig, refine: RefineConfig, init: str,
                      set_name: str = "synthetic", progress: Progress | None = None, relighter=None) -> EvalResult:
     scores: dict[str, list[float]] = {}
+    lpips_net, lpips_note = metric_lpips()
     for k, obj in enumerate(objects):
         if progress:
             progress(f"refining {obj.name}", k, len(objects))
@@ -183,13 +184,12 @@ def evaluate_refined(model, objects: list[HeldoutObject], config: EvalConfig, re
         outputs = obj.protocol.outputs[:config.output_views] if config.output_views else obj.protocol.outputs
         scores.setdefault("seconds", []).append(refined.seconds)
         with torch.no_grad():
-            score_field(refined.field, obj, outputs, config, scores, relighter=relighter, photos=refined.views,
+            score_field(refined.field, obj, outputs, config, scores, lpips_net, relighter=relighter, photos=refined.views,
                         lighting=refined.lighting)
     if progress:
         progress("refined", len(objects), len(objects))
     updates = min(config.updates, min(len(o.protocol.input_sets) for o in objects)) if objects else config.updates
-    return EvalResult(set_name, [o.name for o in objects], [update_scores(updates, scores)], "LPIPS not computed for refined rows",
-                      lighting_of(objects))
+    return EvalResult(set_name, [o.name for o in objects], [update_scores(updates, scores)], lpips_note, lighting_of(objects))
 
 
 RELIGHT_KEYS = ("relight_psnr_h", "relight_psnr_l")
@@ -202,17 +202,18 @@ def per_object_scores(model, objects: list[HeldoutObject], config: EvalConfig, r
     material and relighting scores too; `lighting_source` other than "estimate" (LIGHTING_SOURCES):
     an oracle that knows the inputs' environment ("truth" reads the relighter's renderer's tables)."""
     rows = []
+    lpips_net, _ = metric_lpips()
     for obj in objects:
         oracle = relighter.renderer if lighting_source == "truth" and relighter is not None else None
         refined = refine_object(model, obj, config.updates, refine, init, oracle, lighting_source)
         outputs = obj.protocol.outputs[:config.output_views] if config.output_views else obj.protocol.outputs
         scores: dict[str, list[float]] = {}
         with torch.no_grad():
-            score_field(refined.field, obj, outputs, config, scores, relighter=relighter, photos=refined.views,
+            score_field(refined.field, obj, outputs, config, scores, lpips_net, relighter=relighter, photos=refined.views,
                         lighting=refined.lighting)
         row = update_scores(config.updates, scores).to_dict()
-        keys = ("psnr", "ssim", "albedo_psnr", "roughness_psnr", "metallic_psnr", "chamfer") + (
-            RELIGHT_KEYS if relighter is not None else ())
+        keys = ("psnr", "ssim", "lpips", "albedo_psnr", "roughness_psnr", "metallic_psnr", "chamfer") + (
+            RELIGHT_KEYS + ("relight_lpips",) if relighter is not None else ())
         baked = {k: float(np.mean(v)) for k, v in scores.items() if k.startswith(("baked_", "variant_", "fit_", "swap_", "exported_"))}  # RelightConfig's extras
         rows.append({"object": obj.name, "start": refined.start, "seconds": refined.seconds, "steps": refined.steps,
                      **{k: row[k] for k in keys}, **baked})

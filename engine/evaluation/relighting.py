@@ -261,7 +261,8 @@ def relight_metrics(radiance: np.ndarray, mask: np.ndarray, true_radiance: np.nd
     if lpips_net is not None:
         import torch
 
-        as_tensor = lambda a: torch.from_numpy(np.ascontiguousarray(a, np.float32)).permute(2, 0, 1)[None]  # noqa: E731
+        device = next(lpips_net.parameters()).device
+        as_tensor = lambda a: torch.from_numpy(np.ascontiguousarray(a, np.float32)).permute(2, 0, 1)[None].to(device)  # noqa: E731
         with torch.no_grad():
             out["relight_lpips"] = float(lpips_net(as_tensor(shown_p), as_tensor(shown_t)))
     return out

@@ -16,7 +16,7 @@ def _fmt(value: float | None, digits: int) -> str:
 
 
 HEADER = "| PSNR ↑ | SSIM ↑ | LPIPS ↓ | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ | CD ↓ | views |"
-NOTES = ("PSNR/SSIM: novel views over white. Albedo PSNR after Stanford-ORB's per-channel scale; "
+NOTES = ("PSNR/SSIM/LPIPS: novel views over white; LPIPS v0.1 with AlexNet. Albedo PSNR after Stanford-ORB's per-channel scale; "
          "roughness, metallic and albedo on the object's pixels. CD: symmetric Chamfer distance of the "
          "marching-cubes mesh to the true surface, in units of the bounding-sphere radius.")
 
@@ -29,8 +29,9 @@ def _cells(r) -> str:
 RELIGHT_NOTES = ("Relighting: the exported .glb (mesh, UV atlas, baked textures) rendered by the project's renderer "
                  "under an environment that lit none of the inputs, against the true object under it, after "
                  "Stanford-ORB's per-channel scale. PSNR-H on linear HDR radiance (peak: the truth's brightest "
-                 "object pixel), PSNR-L and SSIM on the tone-mapped images, on Stanford-ORB's pixels: the true mask shrunk by "
-                 "a margin (5 x 5 at 512 px, scaled to the view), so a missing part costs and the silhouette's exact edge does not.")
+                 "object pixel) and PSNR-L on the tone-mapped images, both on Stanford-ORB's pixels: the true mask shrunk by "
+                 "a margin (5 x 5 at 512 px, scaled to the view), so a missing part costs and the silhouette's exact edge does not; "
+                 "SSIM and LPIPS (AlexNet) on the whole tone-mapped images.")
 
 
 def relighting_section(results: list[tuple[str, EvalResult]]) -> list[str]:

