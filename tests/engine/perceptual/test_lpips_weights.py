@@ -89,6 +89,12 @@ def test_an_archive_other_than_the_pinned_one_is_refused_with_its_name(tmp_path)
     assert not (tmp_path / "out").exists()
     with pytest.raises(LirmUserError, match="no such file"):
         install_from_archive(tmp_path / "missing.tar.gz", source, tmp_path / "out")
+    (tmp_path / "a_file").write_text("")
+    with pytest.raises(LirmUserError, match="cannot be written there"):
+        install_from_archive(archive, source, tmp_path / "a_file" / "weights")
+    missing_member = ArchiveSource(source.url, source.sha256, source.size, {"alex": "pkg/other.ckpt"})
+    with pytest.raises(LirmUserError, match="pkg/other.ckpt is missing from the archive"):
+        install_from_archive(archive, missing_member, tmp_path / "out")
 
 
 class _RunsCode:
