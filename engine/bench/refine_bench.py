@@ -155,9 +155,10 @@ def refine_bench_table(result: dict, set_name: str) -> str:
                      f"{b['metallic_psnr']:.2f} | {b['chamfer']:.4f} | {b['steps']:.0f} | {b['seconds']:.0f} | "
                      f"{b['peak_bytes'] / 1e9:.2f} |")
     if result["budgets"] and _optional(result["budgets"][0].get("lpips"), 3) == "-":
-        from lirm.engine.train.perceptual import lpips_available
+        from lirm.engine.evaluation.evaluate import METRIC_NETWORK
+        from lirm.engine.perceptual.lpips_weights import missing_weights_reason
 
-        lines += ["", f"LPIPS not computed: {lpips_available('alex')[1] or 'no view was scored'}."]
+        lines += ["", f"LPIPS skipped: {missing_weights_reason(METRIC_NETWORK) or 'no view was scored'}."]
     if result["budgets"] and "relight_psnr_l" in result["budgets"][0]:
         lines += ["", "The relighting test (materials inverse-rendered):", ""] + _relight_rows(result, "")
         variant = ", ".join(f"{k}={v}" for k, v in _variant_changes(result).items()) or "the default settings"

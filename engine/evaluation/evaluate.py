@@ -1,6 +1,7 @@
 """The paper's evaluation after each progressive update: novel-view PSNR, SSIM and LPIPS (AlexNet,
 when its weights were fetched: `lirm fetch lpips`), albedo PSNR with Stanford-ORB's per-channel
-scale, roughness and metallic PSNR on the object's pixels, and the Chamfer distance of the marching-cubes mesh to the true surface.
+scale, roughness and metallic PSNR on the object's pixels, and the Chamfer distance of the
+marching-cubes mesh to the true surface.
 
 The same state is updated with input set 1, 2, 3, 4 in turn; after each update every output view
 is volume-rendered and scored. Numbers are means over output views (images) or objects (Chamfer).
@@ -24,7 +25,8 @@ from lirm.engine.model.field import device_of
 from lirm.engine.model.occupancy_grid import OccupancyConfig
 from lirm.engine.model.volume_renderer import VolumeRenderConfig, fitted_render, render_camera
 from lirm.engine.synth.view_crops import crop_like_capture, resize_views
-from lirm.engine.train.perceptual import LPIPSLoss, lpips_available
+from lirm.engine.perceptual.lpips_network import LPIPS, load_lpips
+from lirm.engine.perceptual.lpips_weights import missing_weights_reason
 
 from .chamfer import chamfer_distance, surface_samples
 from .heldout_sets import HeldoutObject
@@ -144,7 +146,8 @@ def score_field(field_, obj: HeldoutObject, outputs: list[int], config: EvalConf
         scores.setdefault("psnr", []).append(psnr(colour, truth.image[i]))
         scores.setdefault("ssim", []).append(ssim(colour, truth.image[i]))
         if lpips_net is not None:
-            as_tensor = lambda a: torch.from_numpy(np.ascontiguousarray(a)).permute(2, 0, 1)[None].to(device)  # noqa: E731
+            on = next(lpips_net.parameters()).device
+            as_tensor = lambda a: torch.from_numpy(np.ascontiguousarray(a, np.float32)).permute(2, 0, 1)[None].to(on)  # noqa: E731
             scores.setdefault("lpips", []).append(float(lpips_net(as_tensor(colour), as_tensor(truth.image[i]))))
         if inside.any() and truth.albedo is not None:
             denom = np.maximum(coverage, 1e-6)
@@ -166,10 +169,10 @@ def update_scores(update: int, s: dict[str, list[float]]) -> UpdateScores:
                         _finite_mean(s.get("relight_lpips", [])))
 
 
-def metric_lpips(device="cpu") -> tuple[LPIPSLoss | None, str]:
+def metric_lpips(device="cpu") -> tuple[LPIPS | None, str]:
     """The LPIPS metric's network, or None and the note saying why it is skipped."""
-    ok, why = lpips_available(METRIC_NETWORK)
-    return (LPIPSLoss(METRIC_NETWORK).to(device), "") if ok else (None, f"LPIPS skipped: {why}")
+    why = missing_weights_reason(METRIC_NETWORK)
+    return (None, f"LPIPS skipped: {why}") if why else (load_lpips(METRIC_NETWORK).to(device), "")
 
 
 @torch.no_grad()
