@@ -56,6 +56,7 @@ class TrainBenchConfig:
     profile: bool = False
     profile_rows: int = 15
     json_path: Path | None = None
+    lpips: bool = True  # the perceptual loss training takes: LPIPS where its weights are, else the substitute
 
 
 @dataclass
@@ -79,6 +80,7 @@ class TrainBenchResult:
     samples_per_ray: int
     rays_per_step: int
     data_seconds_per_scene: float
+    perceptual: str = ""  # the perceptual loss in the step (lpips-vgg, or the ms-ssim+gradient substitute)
     runs: list[CheckpointingRun] = field(default_factory=list)
     phases: dict[str, float] = field(default_factory=dict)  # profiled host seconds per part of the step
     top_operators: list[dict] = field(default_factory=list)
@@ -93,7 +95,7 @@ class TrainBenchResult:
     def table(self) -> str:
         lines = [f"training step of '{self.preset}' stage {self.stage} on {self.device}: {self.batch_scenes} scenes, "
                  f"{self.rays_per_step} supervised rays x {self.samples_per_ray} samples; the data made beforehand "
-                 f"({self.data_seconds_per_scene:.2f} s per scene in this process)"]
+                 f"({self.data_seconds_per_scene:.2f} s per scene in this process); perceptual loss: {self.perceptual}"]
         for run in self.runs:
             memory = f", peak {run.peak_bytes / 2**30:.2f} GiB" if run.peak_bytes else ""
             lines.append(f"  gradient checkpointing {'on ' if run.checkpointing else 'off'}: median {run.median_seconds:.3f} s "
@@ -139,7 +141,9 @@ def run_train_bench(config: TrainBenchConfig, progress=None) -> TrainBenchResult
                               rays_per_step=sum(t["origins"].shape[0] for per_update in samples[0].targets for t in per_update),
                               data_seconds_per_scene=data_seconds)
     weights = replace(LossWeights(), numerical_normal=stage.numerical_normal_weight)
-    objective = TrainingObjective(model, weights, perceptual_loss(False)).to(device)
+    perceptual = perceptual_loss(config.lpips)
+    result.perceptual = perceptual.name
+    objective = TrainingObjective(model, weights, perceptual).to(device)
     optimizer = training_optimizer(model, 1e-6)  # a small rate: the timed steps barely move the weights
     render = training_render(stage, stage.inv_beta[0])
     occupancy = OccupancyConfig(resolution=stage.occupancy_resolution) if stage.occupancy_grid else None

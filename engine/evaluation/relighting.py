@@ -10,7 +10,8 @@ under an environment that lit none of its inputs, and compared with the true obj
 - PSNR-L: the same after the set's exposure, ACES and sRGB (the display image), peak 1. (Stanford-ORB
   tone-maps with sRGB alone; ours is what the viewport shows. Its MSE also sums the three channels
   per pixel, which puts its figures 4.8 dB below an ordinary PSNR's; ours is the ordinary one.)
-- SSIM (and LPIPS when it can run) on the display images, the background black in both.
+- SSIM and LPIPS (AlexNet; skipped, with why, where its weights were never fetched) on the display
+  images, the background black in both.
 As Stanford-ORB does, the prediction is first scaled per channel by least squares on those pixels:
 albedo and light are only known up to a common scale, which no method can recover.
 """

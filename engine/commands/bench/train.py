@@ -20,6 +20,7 @@ def add_parser(subparsers) -> None:
                         help="gradient checkpointing of the transformer and of the crops' renders (default auto: on GPUs, as training)")
     parser.add_argument("--scene-views", type=int, help="views rendered per scene (default: the fewest the stage needs)")
     parser.add_argument("--profile", action="store_true", help="one more step under torch.profiler: the costliest operators and parts")
+    parser.add_argument("--no-lpips", action="store_true", help="the SSIM + gradient perceptual loss even where LPIPS can run (as lirm train --no-lpips)")
     parser.add_argument("--json", type=Path, help="also write the figures to this JSON file")
     parser.set_defaults(run=run)
 
@@ -29,7 +30,8 @@ def run(args: argparse.Namespace) -> int:
 
     config = TrainBenchConfig(preset=args.preset, stage=args.stage, batch_scenes=args.batch_scenes, samples_per_ray=args.samples_per_ray,
                               steps=args.steps, warmup_steps=args.warmup_steps, device=args.device, checkpointing=args.checkpointing,
-                              scene_views=args.scene_views, profile=args.profile, json_path=args.json)
+                              scene_views=args.scene_views, profile=args.profile, json_path=args.json,
+                              lpips=not args.no_lpips)
     result = run_train_bench(config, progress=lambda message: print(message, file=sys.stderr))
     print(result.table())
     if args.json:

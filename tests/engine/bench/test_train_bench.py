@@ -9,6 +9,7 @@ import pytest
 
 from lirm.engine.bench.train_step_bench import TrainBenchConfig, run_train_bench
 from lirm.engine.errors import LirmUsageError
+from lirm.engine.train.perceptual import lpips_available
 
 
 def test_train_bench_times_both_settings_and_profiles_a_step(tmp_path):
@@ -23,6 +24,9 @@ def test_train_bench_times_both_settings_and_profiles_a_step(tmp_path):
     figures = json.loads(out.read_text())
     assert figures["runs"][0]["median_seconds"] == result.runs[0].median_seconds
     assert "gradient checkpointing off" in result.table()
+    # The perceptual loss training would take here: LPIPS where its weights were fetched, else the substitute.
+    assert result.perceptual == ("ms-ssim+gradient" if lpips_available()[1] else "lpips-vgg") == figures["perceptual"]
+    assert f"perceptual loss: {result.perceptual}" in result.table()
 
 
 def test_train_bench_refuses_too_few_scene_views():
