@@ -154,7 +154,7 @@ def refine_bench_table(result: dict, set_name: str) -> str:
         lines.append(f"| {b['budget']} | {b['psnr']:.2f} | {b['ssim']:.3f} | {_optional(b.get('lpips'), 3)} | {b['albedo_psnr']:.2f} | {b['roughness_psnr']:.2f} | "
                      f"{b['metallic_psnr']:.2f} | {b['chamfer']:.4f} | {b['steps']:.0f} | {b['seconds']:.0f} | "
                      f"{b['peak_bytes'] / 1e9:.2f} |")
-    if result["budgets"] and _optional(result["budgets"][0].get("lpips"), 3) == "-":
+    if result["budgets"] and not _computed(result["budgets"][0].get("lpips")):
         from lirm.engine.evaluation.evaluate import METRIC_NETWORK
         from lirm.engine.perceptual.lpips_weights import missing_weights_reason
 
@@ -197,9 +197,14 @@ def _relight_rows(result: dict, prefix: str) -> list[str]:
     return lines
 
 
+def _computed(value) -> bool:
+    """Whether a figure was computed (LPIPS is None, or NaN after a JSON round trip, without its weights)."""
+    return value is not None and bool(np.isfinite(value))
+
+
 def _optional(value, digits: int) -> str:
-    """A figure, or "-" where it was not computed (LPIPS without its weights)."""
-    return "-" if value is None or not np.isfinite(value) else f"{value:.{digits}f}"
+    """A figure, or "-" where it was not computed."""
+    return f"{value:.{digits}f}" if _computed(value) else "-"
 
 
 def _variant_changes(result: dict) -> dict:

@@ -146,9 +146,7 @@ def score_field(field_, obj: HeldoutObject, outputs: list[int], config: EvalConf
         scores.setdefault("psnr", []).append(psnr(colour, truth.image[i]))
         scores.setdefault("ssim", []).append(ssim(colour, truth.image[i]))
         if lpips_net is not None:
-            on = next(lpips_net.parameters()).device
-            as_tensor = lambda a: torch.from_numpy(np.ascontiguousarray(a, np.float32)).permute(2, 0, 1)[None].to(on)  # noqa: E731
-            scores.setdefault("lpips", []).append(float(lpips_net(as_tensor(colour), as_tensor(truth.image[i]))))
+            scores.setdefault("lpips", []).append(lpips_net.image_distance(colour, truth.image[i]))
         if inside.any() and truth.albedo is not None:
             denom = np.maximum(coverage, 1e-6)
             scores.setdefault("albedo", []).append(scaled_albedo_psnr(out["albedo"], truth.albedo[i] / denom[..., None], inside))

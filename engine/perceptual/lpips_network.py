@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -76,15 +77,25 @@ class LPIPS(nn.Module):
             distance = distance + ((fx - fy) ** 2 * head.view(1, -1, 1, 1)).sum(1).mean((-2, -1))
         return distance
 
+    @torch.no_grad()
+    def image_distance(self, a, b) -> float:
+        """The distance of two (H, W, 3) images in [0, 1] (numpy or anything array-like), on this network's
+        device: what the metric scores one picture pair with."""
+        device = self.shift.device
+        as_batch = lambda image: torch.as_tensor(np.ascontiguousarray(image, np.float32)).permute(2, 0, 1)[None].to(device)  # noqa: E731
+        return float(self(as_batch(a), as_batch(b))[0])
+
 
 def load_lpips(network: str = "alex", path: Path | None = None) -> LPIPS:
     """The network with its weights; a LirmUserError saying how to fetch them when they are not here."""
     from safetensors import SafetensorError
     from safetensors.torch import load_file
 
+    if path is not None and not path.is_file():
+        raise LirmUserError(f"{path}: no such file (LPIPS {network} weights are written by `lirm fetch lpips --to FOLDER`)")
     path = path or weights_path(network)
     if not path.is_file():
-        raise LirmUserError(missing_weights_reason(network) or f"{path}: no such file")
+        raise LirmUserError(missing_weights_reason(network))
     try:
         state = load_file(str(path))
     except (SafetensorError, OSError) as err:

@@ -59,3 +59,12 @@ def test_differentiable_and_small_images_are_enlarged_not_refused(lpips_net, pho
     lpips_net(x, target).sum().backward()
     assert torch.isfinite(x.grad).all() and x.grad.abs().sum() > 0
     assert all(not p.requires_grad for p in lpips_net.parameters())
+
+
+def test_image_distance_scores_one_picture_pair_as_the_batch_call_does(lpips_net, photo):
+    other = _blurred(photo, 1.5)
+    with torch.no_grad():
+        expected = float(lpips_net(photo, other))
+    as_image = lambda t: t[0].permute(1, 2, 0).numpy().astype(np.float64)  # noqa: E731  what the metrics hold
+    assert lpips_net.image_distance(as_image(photo), as_image(other)) == pytest.approx(expected, rel=1e-5)
+    assert lpips_net.image_distance(as_image(photo), as_image(photo)) == pytest.approx(0.0, abs=1e-6)

@@ -134,3 +134,6 @@ def test_without_weights_lpips_says_how_to_fetch_them_and_the_loss_falls_back(tm
     assert isinstance(perceptual_loss(), SSIMGradientLoss)
     with pytest.raises(LirmUserError, match="lirm fetch lpips"):
         load_lpips("alex")
+    # a file the caller named is the one the error speaks of, not the default folder
+    with pytest.raises(LirmUserError, match=r"mine\.safetensors: no such file"):
+        load_lpips("alex", tmp_path / "mine.safetensors")
