@@ -18,6 +18,14 @@ make the check fire for an object whose top is just under R; the re-fit then lea
 never less. An object taller than the masks' search ball (R / fill) is brought in only as far as
 that ball lets the hull see it.
 
+A capture with no sparse points at all (poses imported from a transforms.json, masks from alpha or a
+folder) was sized by normalize.py from the cameras alone, a guess that the object fills half the
+view: the NeRF lego (20 views) came out 1.8 times too large for the ball, its base plate cut round by
+it. There the masks are the only measure of the object, so its hull sizes the world outright
+(`size_world_from_silhouettes`): carved first in a ball reaching toward the nearest camera, then
+again, finer, in the ball the masks are searched in, each time centred on the middle of the hull's
+extent and scaled so that its farthest voxel lands at `fill * R`.
+
 Masks are pixels and do not move; cameras, points and the support plane are moved by the same
 similarity, recorded in the capture's normalisation so exports still undo it.
 """
@@ -33,7 +41,10 @@ from lirm.engine.capture.masks import check_mask
 from lirm.engine.capture.normalize import Normalization, is_floor
 from lirm.engine.capture.visual_hull import carve_visual_hull, cut_below_plane
 
-__all__ = ["SilhouetteFitConfig", "SilhouetteFit", "fit_world_to_silhouettes", "moved_camera", "moved_normalization"]
+_HALF_DIAGONAL = 3.0**0.5 / 2.0  # a voxel's centre is this many voxel sizes from its farthest corner
+
+__all__ = ["SilhouetteFitConfig", "SilhouetteFit", "fit_world_to_silhouettes", "size_world_from_silhouettes", "moved_camera",
+           "moved_normalization"]
 
 
 @dataclass(frozen=True)
@@ -95,6 +106,53 @@ def fit_world_to_silhouettes(
     radius = max(float(np.percentile(np.linalg.norm(centers - shift, axis=1), config.radius_percentile)),
                  top_height / 2.0)
     return SilhouetteFit(top, fill * target_radius / radius, shift)
+
+
+# The first, wide carve of size_world_from_silhouettes reaches this share of the way to the nearest
+# camera: whatever the cameras' guess of the object's size, the object is in front of every camera.
+WIDE_REACH = 0.9
+
+
+def size_world_from_silhouettes(
+    masks: dict[str, np.ndarray],
+    cameras: dict[str, Camera],
+    target_radius: float,
+    fill: float,
+    search_radius: float,
+    config: SilhouetteFitConfig = SilhouetteFitConfig(),
+    trusted_masks: bool = False,
+) -> SilhouetteFit | None:
+    """The similarity that makes the masks' hull fill the ball of `target_radius` to `fill`, for a
+    world sized from the cameras alone (see the module docstring); None with fewer than 3 usable masks
+    or when the masks agree on nothing. `top` is the hull's farthest reach from the origin before the move.
+    A voxel counts only where half the views or more see it: near the cameras, a corner of space few
+    views cover is not carved by the rest. `trusted_masks` (from alpha or the user's files): every
+    view carves, none is outvoted. The automatic masks' tolerance of a few wrong views would let the
+    three low views of the NeRF lego, the only ones that see under its base plate, be outvoted, and
+    the hull then reached twice the object's height below it."""
+    usable = {f: m for f, m in masks.items() if f in cameras and check_mask(m) is None}
+    if len(usable) < 3:
+        return None
+    views = {f: cameras[f] for f in usable}
+    nearest = min(float(np.linalg.norm(c.center)) for c in views.values())
+    scale, shift, top = 1.0, np.zeros(3), None
+    for reach in (WIDE_REACH * nearest, search_radius):
+        # Each pass carves in the frame the previous one made: its cameras moved, its masks unchanged.
+        moved = {f: moved_camera(c, scale, shift) for f, c in views.items()}
+        hull = carve_visual_hull(usable, moved, radius=reach, resolution=config.resolution,
+                                 min_views_fraction=1.0 if trusted_masks else config.min_views_fraction,
+                                 within_sphere=True, min_views=max(3, (len(usable) + 1) // 2))
+        if hull.is_empty:
+            return None
+        centers = hull.occupied_centers()
+        if top is None:
+            top = float(np.linalg.norm(centers, axis=1).max()) + 0.5 * hull.voxel_size
+        middle = 0.5 * (centers.min(axis=0) + centers.max(axis=0))
+        farthest = float(np.linalg.norm(centers - middle, axis=1).max()) + _HALF_DIAGONAL * hull.voxel_size
+        step = fill * target_radius / farthest
+        # x -> step * (scale * (x - shift) - middle) = scale * step * (x - (shift + middle / scale))
+        shift, scale = shift + middle / scale, scale * step
+    return SilhouetteFit(top, scale, shift)
 
 
 def moved_camera(camera: Camera, scale: float, shift: np.ndarray) -> Camera:

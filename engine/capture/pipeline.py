@@ -26,7 +26,8 @@ from ..lighting.capture_lighting import CaptureLightingConfig, estimate_capture_
 from .disk_space import require_free_space, stage_bytes
 from .ingest import Cancelled, IngestConfig, ingest_photos, natural_key
 from .masks import check_mask, cut_by_border, load_user_masks, mask_from_alpha, propagate_mask_fix
-from .fit_to_silhouettes import fit_world_to_silhouettes, moved_camera, moved_normalization
+from .fit_to_silhouettes import fit_world_to_silhouettes, moved_camera, moved_normalization, size_world_from_silhouettes
+from .imported_pose_points import points_in_imported_frame
 from .normalize import NormalizeConfig, estimate_normalization, is_floor
 from .pose_import import import_colmap_model, import_transforms_json
 from .records import PosingResult
@@ -245,6 +246,14 @@ def _pose(capture: Capture, config: CaptureConfig, progress, cancel, new_frames)
     if config.poses:
         path = Path(config.poses)
         result = import_transforms_json(path, records) if path.is_file() else import_colmap_model(path, records)
+        automatic_masks_ahead = config.masks == "automatic" or (config.masks == "auto" and not all(r.has_alpha for r in records))
+        if len(result.points) == 0 and automatic_masks_ahead:
+            # The automatic masks are seeded by sparse points, which a transforms.json does not hold.
+            pose_progress = (lambda stage, done, total: progress(f"points: {stage}", done, total)) if progress else None
+            colmap = pose_with_colmap(records, capture.root, capture.root / "colmap", config=config.colmap,
+                                      progress=pose_progress, cancel=cancel)
+            result, note = points_in_imported_frame(result, colmap)
+            capture.log("points for imported poses", note=note)
     else:
         work = capture.root / "colmap"
         pose_progress = (lambda stage, done, total: progress(f"pose: {stage}", done, total)) if progress else None
@@ -347,7 +356,7 @@ def _masks(capture: Capture, config: CaptureConfig, progress, cancel) -> None:
         # not seen), but either the object was framed too tight or the mask took in background that
         # runs out of the picture; it is used, and named in the report.
         capture.frames[f].mask_warning = None if problem else cut_by_border(masks[f])
-    _fit_world_to_masks(capture, config, {f: masks[f] for f in posed if f in masks})
+    _fit_world_to_masks(capture, config, {f: masks[f] for f in posed if f in masks}, trusted=source != "auto")
     capture.log("masks", source=source, ok=sum(capture.frames[f].mask_status == "ok" for f in posed))
     capture.save()
 
@@ -362,13 +371,18 @@ def _mask_search_radius(config: CaptureConfig) -> float:
     return config.normalize.target_radius / config.normalize.fill
 
 
-def _fit_world_to_masks(capture: Capture, config: CaptureConfig, masks: dict[str, np.ndarray]) -> None:
-    """When the masks' hull rises out of the ball, move the world so the object fits it
-    (engine/capture/fit_to_silhouettes.py); the masks, being pixels, stay as they are."""
+def _fit_world_to_masks(capture: Capture, config: CaptureConfig, masks: dict[str, np.ndarray], trusted: bool) -> None:
+    """When the masks' hull rises out of the ball, move the world so the object fits it; when the world
+    was sized from the cameras alone (no sparse points: imported poses), size it from the hull
+    (engine/capture/fit_to_silhouettes.py). The masks, being pixels, stay as they are."""
     if capture.normalization is None:
         return
-    fit = fit_world_to_silhouettes(masks, capture.cameras, capture.normalization, config.normalize.target_radius,
-                                   config.normalize.fill, _mask_search_radius(config))
+    if capture.normalization.used_points == 0:
+        fit = size_world_from_silhouettes(masks, capture.cameras, config.normalize.target_radius, config.normalize.fill,
+                                          _mask_search_radius(config), trusted_masks=trusted)
+    else:
+        fit = fit_world_to_silhouettes(masks, capture.cameras, capture.normalization, config.normalize.target_radius,
+                                       config.normalize.fill, _mask_search_radius(config))
     if fit is None or not fit.moved:
         return
     capture.cameras = {f: moved_camera(c, fit.scale, fit.shift) for f, c in capture.cameras.items()}

@@ -1,23 +1,25 @@
 """The world re-fitted to the masks' hull when an object rises out of the ball (a bottle whose cap
-carries no sparse points), and left alone when it fits."""
+carries no sparse points), and left alone when it fits; and sized by the hull outright when there were
+no sparse points at all (imported poses)."""
 
 import numpy as np
 
 from lirm.engine.cameras import orbit_camera
-from lirm.engine.capture.fit_to_silhouettes import fit_world_to_silhouettes, moved_camera, moved_normalization
+from lirm.engine.capture.fit_to_silhouettes import (fit_world_to_silhouettes, moved_camera, moved_normalization,
+                                                     size_world_from_silhouettes)
 from lirm.engine.capture.normalize import Normalization
 
 PLANE_Z = -0.85
 
 
-def _cylinder_masks(top: float, radius: float = 0.35, views: int = 12, size=(160, 120)):
+def _cylinder_masks(top: float, radius: float = 0.35, views: int = 12, size=(160, 120), elevations=(30.0,)):
     """Exact masks of an upright cylinder standing on z = PLANE_Z, seen from a ring of cameras 30
     degrees above it: a ray hits it where its stretch inside the infinite cylinder meets the slab
     between the plane and the top (both convex)."""
     w, h = size
     cameras, masks = {}, {}
     for i in range(views):
-        cam = orbit_camera(360.0 * i / views, 30.0, 4.5, w, h, 45.0)
+        cam = orbit_camera(360.0 * i / views, elevations[i % len(elevations)], 4.5, w, h, 45.0)
         o, d = cam.pixel_rays()
         a = d[..., 0] ** 2 + d[..., 1] ** 2
         b = 2 * (o[..., 0] * d[..., 0] + o[..., 1] * d[..., 1])
@@ -88,3 +90,23 @@ def test_an_object_that_fits_is_left_alone_and_nothing_without_a_plane():
     assert fit_world_to_silhouettes(tall_masks, tall_cameras, wall, 1.0, 0.85, 1.0 / 0.85) is None
     two = dict(list(masks.items())[:2])
     assert fit_world_to_silhouettes(two, cameras, norm, 1.0, 0.85, 1.0 / 0.85) is None
+
+
+def test_a_world_sized_from_the_cameras_alone_is_sized_from_the_masks():
+    """Imported poses and no sparse points: normalisation guessed the size from the cameras. Whether the
+    guess made the object 2.5 times too large or too small, the hull moves it into the ball, filling it."""
+    top = 0.6
+    cameras, masks = _cylinder_masks(top=top, views=18, elevations=(-15.0, 20.0, 50.0))
+    rims = np.array([[0.35 * np.cos(a), 0.35 * np.sin(a), z] for a in np.linspace(0, 2 * np.pi, 24) for z in (PLANE_Z, top)])
+    middle = np.array([0.0, 0.0, 0.5 * (PLANE_Z + top)])
+    for guess in (2.5, 0.4):
+        offset = np.array([0.1, -0.2, 0.05])
+        guessed = {f: moved_camera(c, guess, offset) for f, c in cameras.items()}  # x -> guess * (x - offset)
+        fit = size_world_from_silhouettes(masks, guessed, target_radius=1.0, fill=0.85, search_radius=1.0 / 0.85,
+                                          trusted_masks=True)
+        assert fit is not None and fit.moved
+        to_world = lambda p: fit.scale * (guess * (p - offset) - fit.shift)  # noqa: E731
+        reach = np.linalg.norm(to_world(rims), axis=1).max()
+        assert 0.7 < reach < 0.9, (guess, reach)  # inside the ball, near fill * R: the hull is a voxel fatter
+        assert np.linalg.norm(to_world(middle)) < 0.1, guess
+    assert size_world_from_silhouettes(dict(list(masks.items())[:2]), cameras, 1.0, 0.85, 1.0 / 0.85) is None
