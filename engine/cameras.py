@@ -450,6 +450,15 @@ class Camera:
         """Same intrinsics, another OpenCV camera-to-world pose."""
         return dataclasses.replace(self, c2w=c2w)
 
+    def moved_by(self, similarity: np.ndarray) -> "Camera":
+        """The same camera in a world moved by `similarity` (4x4: a rotation times a uniform scale, and a
+        translation): it sees every moved point where it saw the point before. The scale moves the
+        centre only; the rotation stays orthonormal."""
+        similarity = np.asarray(similarity, dtype=np.float64)
+        c2w = similarity @ self.c2w
+        c2w[:3, :3] /= float(np.cbrt(abs(np.linalg.det(similarity[:3, :3]))))
+        return self.with_pose(c2w)
+
     def crop_resize(
         self, x0: float, y0: float, crop_w: float, crop_h: float, out_w: int, out_h: int
     ) -> "Camera":

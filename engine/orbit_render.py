@@ -146,6 +146,28 @@ def render_orbit(
     return result
 
 
+def cameras_of_capture(capture_dir: str | Path, asset: str | Path) -> list[Camera]:
+    """The posed cameras of a capture folder (frame order), in the frame of `asset`, an export of it:
+    the export stands the asset on the ground and records where (glb_placement), and the cameras
+    are moved the same way, so that each render lines up with its photo."""
+    from .capture.capture_folder import Capture
+    from .errors import LirmUserError
+    from .export.glb_placement import read_placement
+
+    capture_dir = Path(capture_dir)
+    if not (capture_dir / "capture.json").is_file():
+        raise LirmUserError(f"{capture_dir}: a folder, but not a capture (no capture.json); pass a capture folder "
+                            f"or a transforms.json")
+    capture = Capture.open(capture_dir)
+    if not capture.cameras:
+        raise LirmUserError(f"{capture_dir}: no posed photo to render from")
+    placement = read_placement(asset)
+    if placement is None:
+        raise LirmUserError(f"{asset}: it does not say where it was placed (not a `lirm export` .glb), so the capture's "
+                            f"cameras cannot be put where it is; pass a transforms.json in the asset's own frame instead")
+    return [capture.cameras[f].moved_by(placement) for f in sorted(capture.cameras)]
+
+
 def cameras_from_transforms(path: str | Path) -> list[Camera]:
     """Every frame's camera of a nerfstudio / NeRF transforms.json, in file order (intrinsics from
     the frame or the top level; w and h are needed: the image size to render)."""

@@ -55,9 +55,7 @@ class Normalization:
         return float(np.cbrt(abs(np.linalg.det(self.world_from_source[:3, :3]))))
 
     def apply_to_camera(self, camera: Camera) -> Camera:
-        c2w = self.world_from_source @ camera.c2w
-        c2w[:3, :3] /= self.scale  # keep the rotation orthonormal: scale moves centres only
-        return camera.with_pose(c2w)
+        return camera.moved_by(self.world_from_source)
 
     def apply_to_points(self, points: np.ndarray) -> np.ndarray:
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)

@@ -23,10 +23,12 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--supersample", type=int, default=2, choices=[1, 2, 3, 4], help="anti-aliasing factor (default 2)")
     parser.add_argument("--no-background", action="store_true", help="transparent background (RGBA beauty)")
     parser.add_argument("--keep-scale", action="store_true", help="do not fit the asset into the unit sphere")
-    parser.add_argument("--cameras", type=Path, metavar="TRANSFORMS_JSON",
+    parser.add_argument("--cameras", type=Path, metavar="TRANSFORMS_JSON|CAPTURE",
                         help="render from exactly these cameras (a transforms.json, e.g. one this command wrote) with the "
                              "asset in its own frame (not refitted), so that an original and its reconstruction compare "
-                             "view for view; --views, --size, --elevation and --fov are then unused")
+                             "view for view; or a capture folder: its photos' cameras, moved to where the export placed "
+                             "the asset, to set each render beside its photo; --views, --size, --elevation and --fov "
+                             "are then unused")
     parser.add_argument("--ibl", default="default", choices=["default", "preview", "high"],
                         help="environment filtering quality: preview is faster on a CPU, high is finer on a GPU")
     parser.add_argument("--list", action="store_true", help="list the built-in objects and environments and exit")
@@ -68,7 +70,12 @@ def run(args: argparse.Namespace) -> int:
 
         from ..orbit_render import MAX_RENDER_SIDE
 
-        cameras = cameras_from_transforms(args.cameras)
+        if args.cameras.is_dir():
+            from ..orbit_render import cameras_of_capture
+
+            cameras = cameras_of_capture(args.cameras, args.asset)
+        else:
+            cameras = cameras_from_transforms(args.cameras)
         largest = max(max(c.width, c.height) for c in cameras) * args.supersample
         if largest > MAX_RENDER_SIDE:
             raise LirmUsageError(f"{args.cameras}: its cameras render {largest} pixels a side with supersample "

@@ -373,6 +373,21 @@ def test_derived_quantities_and_with_pose():
         cam.fx = 1.0  # type: ignore[misc]
 
 
+def test_moved_by_a_similarity_sees_every_moved_point_where_it_was():
+    cam = make_camera()
+    angle = 0.7
+    similarity = np.eye(4)
+    similarity[:3, :3] = 2.5 * np.array([[math.cos(angle), -math.sin(angle), 0], [math.sin(angle), math.cos(angle), 0], [0, 0, 1]])
+    similarity[:3, 3] = (0.3, -1.2, 0.4)
+    moved = cam.moved_by(similarity)
+    points = cam.center + cam.forward * 3.0 + np.random.default_rng(0).uniform(-0.5, 0.5, (20, 3))
+    before, depth = cam.project(points)
+    after, moved_depth = moved.project(points @ similarity[:3, :3].T + similarity[:3, 3])
+    np.testing.assert_allclose(after, before, atol=1e-9)
+    np.testing.assert_allclose(moved_depth, 2.5 * depth, atol=1e-9)  # the scale moves centres, not the image
+    np.testing.assert_allclose(moved.rotation.T @ moved.rotation, np.eye(3), atol=1e-12)
+
+
 def test_validation():
     with pytest.raises(ValueError, match="rigid"):
         Camera(10, 10, 5, 5, 5, 5, np.diag([2.0, 2, 2, 1]))

@@ -8,8 +8,10 @@ import json
 import shutil
 import struct
 
+import cv2
 import numpy as np
 
+from lirm.engine.capture.capture_folder import Capture
 from lirm.engine.cli import main
 from lirm.engine.export.capture_export import standing_on_the_ground
 from lirm.engine.export.glb_placement import read_placement
@@ -66,3 +68,26 @@ def test_a_stated_height_exports_in_metres(lego_capture, tmp_path, capsys):
     position = (g := _gltf(out))["accessors"][g["meshes"][0]["primitives"][0]["attributes"]["POSITION"]]
     assert abs(position["max"][1] - position["min"][1] - 0.095) < 1e-6 and abs(position["min"][1]) < 1e-6
     assert main(["capture", "--real-size", "tall", str(capture)]) == 2
+
+
+def test_the_photos_cameras_render_an_export_where_its_photos_see_the_object(lego_capture, tmp_path, capsys, shared_data):
+    """`lirm render ASSET --cameras CAPTURE`: the photos' cameras moved to where the export stood the
+    asset, so each render lines up with its photo (a short refinement from the masks' hull)."""
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    assert main(["refine", str(capture), "--iterations", "40"]) == 0
+    out = tmp_path / "asset.glb"
+    assert main(["export", str(capture), "-o", str(out), "--faces", "4000", "--texture", "64", "--grid", "96"]) == 0
+    renders = tmp_path / "renders"
+    assert main(["render", str(out), "--cameras", str(capture), "-o", str(renders), "--supersample", "1"]) == 0
+    opened = Capture.open(capture)
+    for frame, mask_file in zip(sorted(opened.cameras), sorted((renders / "mask").glob("*.png"))):
+        rendered = cv2.imread(str(mask_file), cv2.IMREAD_GRAYSCALE) > 127
+        photo = opened.read_mask(frame) > 127
+        assert (rendered & photo).sum() / (rendered | photo).sum() > 0.7, frame
+    capsys.readouterr()
+    assert main(["render", str(out), "--cameras", str(tmp_path), "-o", str(tmp_path / "r2")]) != 0
+    assert "not a capture (no capture.json)" in capsys.readouterr().err
+    another_tools = shared_data / "pbr_models" / "Avocado_tex256.glb"  # no placement recorded
+    assert main(["render", str(another_tools), "--cameras", str(capture), "-o", str(tmp_path / "r3")]) != 0
+    assert "does not say where it was placed" in capsys.readouterr().err
