@@ -39,9 +39,7 @@ import numpy as np
 from lirm.engine.cameras import Camera
 from lirm.engine.capture.masks import check_mask
 from lirm.engine.capture.normalize import Normalization, is_floor
-from lirm.engine.capture.visual_hull import carve_visual_hull, cut_below_plane
-
-_HALF_DIAGONAL = 3.0**0.5 / 2.0  # a voxel's centre is this many voxel sizes from its farthest corner
+from lirm.engine.capture.visual_hull import VOXEL_HALF_DIAGONAL, carve_visual_hull, cut_below_plane
 
 __all__ = ["SilhouetteFitConfig", "SilhouetteFit", "fit_world_to_silhouettes", "size_world_from_silhouettes", "moved_camera",
            "moved_normalization"]
@@ -148,7 +146,7 @@ def size_world_from_silhouettes(
         if top is None:
             top = float(np.linalg.norm(centers, axis=1).max()) + 0.5 * hull.voxel_size
         middle = 0.5 * (centers.min(axis=0) + centers.max(axis=0))
-        farthest = float(np.linalg.norm(centers - middle, axis=1).max()) + _HALF_DIAGONAL * hull.voxel_size
+        farthest = float(np.linalg.norm(centers - middle, axis=1).max()) + VOXEL_HALF_DIAGONAL * hull.voxel_size
         step = fill * target_radius / farthest
         # x -> step * (scale * (x - shift) - middle) = scale * step * (x - (shift + middle / scale))
         shift, scale = shift + middle / scale, scale * step
@@ -157,17 +155,20 @@ def size_world_from_silhouettes(
 
 def moved_camera(camera: Camera, scale: float, shift: np.ndarray) -> Camera:
     """The camera in the world moved by x -> scale * (x - shift) (orientation unchanged)."""
-    c2w = np.array(camera.c2w, dtype=np.float64, copy=True)
-    c2w[:3, 3] = scale * (c2w[:3, 3] - shift)
-    return camera.with_pose(c2w)
+    return camera.moved_by(_similarity(scale, shift))
+
+
+def _similarity(scale: float, shift: np.ndarray) -> np.ndarray:
+    """x -> scale * (x - shift) as a 4x4."""
+    step = np.eye(4)
+    step[:3, :3] *= scale
+    step[:3, 3] = -scale * np.asarray(shift, dtype=np.float64)
+    return step
 
 
 def moved_normalization(norm: Normalization, scale: float, shift: np.ndarray) -> Normalization:
     """`norm` followed by x -> scale * (x - shift): the transform, the plane and its margin."""
-    step = np.eye(4)
-    step[:3, :3] *= scale
-    step[:3, 3] = -scale * np.asarray(shift, dtype=np.float64)
-    world_from_source = step @ norm.world_from_source
+    world_from_source = _similarity(scale, shift) @ norm.world_from_source
     source_from_world = np.linalg.inv(world_from_source)
     plane = None
     if norm.plane is not None:

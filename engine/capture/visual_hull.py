@@ -21,10 +21,11 @@ import numpy as np
 
 from lirm.engine.cameras import Camera, undistort_normalized
 
-__all__ = ["VoxelHull", "carve_visual_hull", "cut_below_plane", "project_hull", "project_points", "sphere_silhouette"]
+__all__ = ["VOXEL_HALF_DIAGONAL", "VoxelHull", "carve_visual_hull", "cut_below_plane", "project_hull", "project_points",
+           "sphere_silhouette"]
 
 # Half the space diagonal of a unit cube: a voxel of size s fits in a ball of radius 0.866 s.
-_HALF_DIAGONAL = math.sqrt(3.0) / 2.0
+VOXEL_HALF_DIAGONAL = math.sqrt(3.0) / 2.0
 # A mask knows the object only to a pixel: a pixel-centre sample can miss up to half a pixel
 # diagonal of coverage, and a projected point is looked up in the pixel that holds it, another
 # half diagonal. Carving allows this much on top of a voxel's projected size.
@@ -237,7 +238,7 @@ def carve_visual_hull(
     lo = bidx * block
     hi = np.minimum(lo + block, resolution)
     bcenters = -radius + 0.5 * (lo + hi) * s
-    bball = _HALF_DIAGONAL * block * s
+    bball = VOXEL_HALF_DIAGONAL * block * s
     if within_sphere:
         inball = np.einsum("ij,ij->i", bcenters, bcenters) <= (radius + bball) ** 2
         bidx, bcenters = bidx[inball], bcenters[inball]
@@ -257,9 +258,9 @@ def carve_visual_hull(
         done, idx = np.zeros((0, 3), np.int64), bidx
     pts = hull.centers_of(idx)
     if within_sphere:
-        inball = np.einsum("ij,ij->i", pts, pts) <= (radius + _HALF_DIAGONAL * s) ** 2
+        inball = np.einsum("ij,ij->i", pts, pts) <= (radius + VOXEL_HALF_DIAGONAL * s) ** 2
         idx, pts = idx[inball], pts[inball]
-    idx = np.concatenate([done, idx[_carve(pts, _HALF_DIAGONAL * s, *args)[0]]])
+    idx = np.concatenate([done, idx[_carve(pts, VOXEL_HALF_DIAGONAL * s, *args)[0]]])
     hull.occupancy[idx[:, 0], idx[:, 1], idx[:, 2]] = True
     return hull
 

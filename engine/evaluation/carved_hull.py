@@ -31,7 +31,7 @@ import torch.nn.functional as F
 from scipy import ndimage
 
 from lirm.engine.cameras import Camera, camera_from_plucker
-from lirm.engine.capture.visual_hull import VoxelHull, distance_to
+from lirm.engine.capture.visual_hull import VOXEL_HALF_DIAGONAL, VoxelHull, distance_to
 from lirm.engine.model.field import FieldSample
 from lirm.engine.model.lirm import ViewBatch
 from lirm.renderer.tonemap import srgb_to_linear
@@ -57,7 +57,6 @@ class CarvedHullState:
     updates: int = 0
 
 
-_HALF_DIAGONAL = math.sqrt(3.0) / 2.0  # a voxel's bounding ball, in voxel sides
 
 def object_mask(image: np.ndarray, background: np.ndarray) -> np.ndarray:
     """uint8 mask (255 = object) of a masked input: background pixels are the white fill where the
@@ -180,7 +179,7 @@ def _carve(hull: VoxelHull, camera: Camera, mask: np.ndarray, footprint: bool = 
     if footprint:
         # The ball's projected radius, and a pixel's diagonal: the mask and the projected centre are
         # both read at whole pixels.
-        reach = _HALF_DIAGONAL * hull.voxel_size * max(camera.fx, camera.fy) / z[inside] + math.sqrt(2.0)
+        reach = VOXEL_HALF_DIAGONAL * hull.voxel_size * max(camera.fx, camera.fy) / z[inside] + math.sqrt(2.0)
         on_object[inside] = distance_to(mask).ravel()[pixel[inside]] <= reach
     else:
         on_object[inside] = mask.ravel()[pixel[inside]]
