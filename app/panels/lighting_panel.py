@@ -38,6 +38,10 @@ class LightingPanel:
             imgui.end_combo()
         if view.environment in own:
             self._draw_panorama(photographed.parent)
+        elif photographed is None and state.capture_dir is not None:
+            reason = self._missing_reason(state.capture_dir)
+            imgui.text_wrapped(f"No \"{AS_PHOTOGRAPHED}\" lighting: {reason}. The environments here still light it; "
+                               "a refinement fits the materials only under a lighting estimate.")
         imgui.set_next_item_width(-110)
         _, self.hdri_path = imgui.input_text("##hdri", self.hdri_path)
         imgui.same_line()
@@ -52,6 +56,17 @@ class LightingPanel:
         changed, background = imgui.checkbox("show the environment behind", view.background)
         if changed:
             actions.set_background(background)
+
+    def _missing_reason(self, capture_dir) -> str:
+        """Why the capture has no lighting estimate, read once per capture.json version."""
+        path = Path(capture_dir) / "capture.json"
+        try:
+            key = (str(path), path.stat().st_mtime_ns)
+        except OSError:
+            return "its capture.json cannot be read"
+        if getattr(self, "_reason_key", None) != key:
+            self._reason_key, self._reason = key, missing_lighting_reason(Path(capture_dir))
+        return self._reason
 
     def as_photographed_path(self) -> Path | None:
         """The open capture's lighting estimate, when it has one."""
@@ -72,3 +87,16 @@ class LightingPanel:
         imgui.text_wrapped(f"estimated from the backgrounds of {info.get('photos_used', '?')} photos; "
                            + (f"{100 * seen:.0f}% of directions seen, " if seen is not None else "")
                            + "the hatched rest is filled smoothly, not measured")
+
+
+def missing_lighting_reason(capture_dir: Path) -> str:
+    """What the capture's lighting stage said when it made no estimate (its last word in the capture's
+    history), or that it has not run yet."""
+    try:
+        history = json.loads((Path(capture_dir) / "capture.json").read_text()).get("history", [])
+    except (OSError, ValueError, AttributeError):
+        return "its capture.json cannot be read"
+    said = [entry for entry in history if isinstance(entry, dict) and entry.get("action") == "lighting"]
+    if not said:
+        return "not estimated yet: `lirm capture --resume` estimates it"
+    return str(said[-1].get("reason") or "not estimated")
