@@ -8,7 +8,7 @@ from pathlib import Path
 
 from imgui_bundle import imgui
 
-from lirm.engine.lighting.capture_lighting import INFO_FILE, LIGHTING_FOLDER, PANORAMA_FILE, PICTURE_FILE
+from lirm.engine.lighting.capture_lighting import INFO_FILE, LIGHTING_FOLDER, PANORAMA_FILE, PICTURE_FILE, missing_lighting_reason
 from lirm.renderer.procedural_environments import PROCEDURAL_ENVIRONMENTS
 
 AS_PHOTOGRAPHED = "as photographed"
@@ -87,16 +87,3 @@ class LightingPanel:
         imgui.text_wrapped(f"estimated from the backgrounds of {info.get('photos_used', '?')} photos; "
                            + (f"{100 * seen:.0f}% of directions seen, " if seen is not None else "")
                            + "the hatched rest is filled smoothly, not measured")
-
-
-def missing_lighting_reason(capture_dir: Path) -> str:
-    """What the capture's lighting stage said when it made no estimate (its last word in the capture's
-    history), or that it has not run yet."""
-    try:
-        history = json.loads((Path(capture_dir) / "capture.json").read_text()).get("history", [])
-    except (OSError, ValueError, AttributeError):
-        return "its capture.json cannot be read"
-    said = [entry for entry in history if isinstance(entry, dict) and entry.get("action") == "lighting"]
-    if not said:
-        return "not estimated yet: `lirm capture --resume` estimates it"
-    return str(said[-1].get("reason") or "not estimated")

@@ -263,6 +263,19 @@ def load_capture_lighting(capture_root: str | Path) -> CaptureLighting | None:
                            info.get("proxy") == "support plane and sphere")
 
 
+def missing_lighting_reason(capture_root: str | Path) -> str:
+    """Why a capture has no estimate: what its lighting stage said (its last word in the capture's
+    history), or that the stage has not run yet."""
+    try:
+        history = json.loads((Path(capture_root) / "capture.json").read_text()).get("history", [])
+    except (OSError, ValueError, AttributeError):
+        return "its capture.json cannot be read"
+    said = [entry for entry in history if isinstance(entry, dict) and entry.get("action") == "lighting"]
+    if not said:
+        return "not estimated yet: `lirm capture --resume` estimates it"
+    return str(said[-1].get("reason") or "not estimated")
+
+
 def load_capture_lighting_info(capture_root: str | Path) -> dict | None:
     path = Path(capture_root) / LIGHTING_FOLDER / INFO_FILE
     return json.loads(path.read_text()) if path.is_file() else None

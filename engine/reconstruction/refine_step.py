@@ -170,13 +170,13 @@ def _refine_locked(capture_dir, source: ModelSource, config: RefineConfig, init:
             save_field_state(current.frozen_field(), live_path, updates=len(capture.updates) + 1, extra={"live": True})
     lighting = None
     if config.inverse_rendering:
-        from lirm.engine.lighting.capture_lighting import load_capture_lighting
+        from lirm.engine.lighting.capture_lighting import load_capture_lighting, missing_lighting_reason
         from lirm.engine.lighting.panorama_lighting import PanoramaLighting
 
         estimate = load_capture_lighting(capture.root)
         if estimate is None:
-            notes.append("no lighting estimate in the capture (`lirm capture --resume` makes one): the materials "
-                         "are not inverse-rendered")
+            notes.append(f"no lighting estimate in the capture ({missing_lighting_reason(capture.root)}): the "
+                         "materials are not inverse-rendered")
         else:
             lighting = PanoramaLighting.from_capture_lighting(estimate, config.lighting_height, config.lighting_sharpest_lobe,
                                                                     config.light_lobes, config.lighting_smooth_scale)

@@ -1,12 +1,12 @@
-"""The Lighting panel says why a capture has no "as photographed" lighting: the capture stage's own
-reason (cut-outs show no background), or that it has not run yet."""
+"""Why a capture has no "as photographed" lighting, as the Lighting panel and `lirm refine` say it:
+the capture stage's own reason (cut-outs show no background), or that it has not run yet."""
 
 from __future__ import annotations
 
 import json
 import shutil
 
-from lirm.app.panels.lighting_panel import missing_lighting_reason
+from lirm.engine.lighting.capture_lighting import missing_lighting_reason
 
 
 def test_a_capture_without_a_lighting_estimate_says_why(lego_capture, tmp_path):
