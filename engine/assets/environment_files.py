@@ -67,13 +67,15 @@ def resolve_environment(name_or_path: str | Path, width: int = 1024) -> Environm
 
 def _capture_lighting(capture: Path) -> Environment:
     """A capture folder stands for the lighting its photos were taken in ("as photographed")."""
-    from lirm.engine.lighting.capture_lighting import ENVIRONMENT_NAME, LIGHTING_FOLDER, PANORAMA_FILE
+    from lirm.engine.lighting.capture_lighting import ENVIRONMENT_NAME, LIGHTING_FOLDER, PANORAMA_FILE, missing_lighting_reason
 
     path = capture / LIGHTING_FOLDER / PANORAMA_FILE
     if not path.is_file():
-        raise EnvironmentLoadError(
-            f"{capture}: this capture has no lighting estimate yet ({path} is missing); "
-            f"`lirm capture --resume {capture}` estimates it from the photos' backgrounds")
+        reason = missing_lighting_reason(capture)
+        if "not estimated yet" in reason:
+            reason = f"not estimated yet: `lirm capture --resume {capture}` estimates it from the photos' backgrounds"
+        raise EnvironmentLoadError(f"{capture}: this capture has no lighting estimate ({reason}); pass a built-in "
+                                   f"environment or an HDRI instead")
     environment = load_environment_file(path)
     environment.name = ENVIRONMENT_NAME
     return environment

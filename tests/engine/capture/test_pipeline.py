@@ -130,7 +130,7 @@ def test_imported_poses_and_alpha_masks(tmp_path, shared_data):
     assert np.linalg.norm(hull.occupied_centers(), axis=1).max() > 0.7
     # Cut-out renders show no background: no lighting estimate, said in the report, not an error.
     assert "lighting as photographed: none (no photo shows any background" in format_capture_report(summary)
-    with pytest.raises(EnvironmentLoadError, match="no lighting estimate yet"):
+    with pytest.raises(EnvironmentLoadError, match="no lighting estimate \\(no photo shows any background"):
         resolve_environment(tmp_path / "capture")
 
 
