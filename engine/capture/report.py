@@ -18,6 +18,9 @@ def format_capture_report(summary: CaptureSummary, reference: Path | None = None
     for frame_id, state in sorted(capture.frames.items()):
         if state.pose_status != "registered":
             lines.append(f"    {state.record.original.name} ({frame_id}): {state.pose_status}")
+    points_for_imported = [e for e in capture.history if e.get("action") == "points for imported poses"]
+    if points_for_imported:  # imported poses with automatic masks: where their seeds came from, or why none did
+        lines.append(f"  points for the automatic masks: {points_for_imported[-1].get('note')}")
     lines.append(f"  masks ok: {summary.masked} of {summary.registered}")
     for frame_id, state in sorted(capture.frames.items()):
         if frame_id in capture.cameras and state.mask_status != "ok":

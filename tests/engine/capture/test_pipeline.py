@@ -134,7 +134,7 @@ def test_imported_poses_and_alpha_masks(tmp_path, shared_data):
         resolve_environment(tmp_path / "capture")
 
 
-def test_imported_poses_with_automatic_masks_get_points_from_colmap(tmp_path, shared_data):
+def test_imported_poses_with_automatic_masks_get_points_from_colmap(tmp_path, shared_data, capsys):
     """A transforms.json holds no sparse points, and the automatic masks are seeded by them: without
     COLMAP's, these twelve fox photos got twelve empty masks. Its points are carried into the imported
     frame; the imported cameras stay as the file has them."""
@@ -145,6 +145,7 @@ def test_imported_poses_with_automatic_masks_get_points_from_colmap(tmp_path, sh
         shutil.copy(p, folder / p.name)
     poses = shared_data / "real_instantngp_fox" / "transforms.json"
     assert main(["capture", str(folder), "-o", str(tmp_path / "capture"), "--poses", str(poses), "--max-side", "640"]) == 0
+    assert "points for the automatic masks: " in capsys.readouterr().out  # the report says where they came from
     capture = Capture.open(tmp_path / "capture")
     assert capture.settings["pose_source"] == "transforms.json"
     note = [e for e in capture.history if e.get("action") == "points for imported poses"][0]["note"]
