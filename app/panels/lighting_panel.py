@@ -20,6 +20,7 @@ class LightingPanel:
     def __init__(self, app):
         self.app = app
         self.hdri_path = ""
+        self._reason_key, self._reason = None, ""  # missing_lighting_reason, kept per capture.json version
 
     def draw(self) -> None:
         state, actions = self.app.state, self.app.actions
@@ -64,7 +65,7 @@ class LightingPanel:
             key = (str(path), path.stat().st_mtime_ns)
         except OSError:
             return "its capture.json cannot be read"
-        if getattr(self, "_reason_key", None) != key:
+        if self._reason_key != key:
             self._reason_key, self._reason = key, missing_lighting_reason(Path(capture_dir))
         return self._reason
 

@@ -72,8 +72,6 @@ def _capture_lighting(capture: Path) -> Environment:
     path = capture / LIGHTING_FOLDER / PANORAMA_FILE
     if not path.is_file():
         reason = missing_lighting_reason(capture)
-        if "not estimated yet" in reason:
-            reason = f"not estimated yet: `lirm capture --resume {capture}` estimates it from the photos' backgrounds"
         raise EnvironmentLoadError(f"{capture}: this capture has no lighting estimate ({reason}); pass a built-in "
                                    f"environment or an HDRI instead")
     environment = load_environment_file(path)

@@ -246,17 +246,15 @@ def _pose(capture: Capture, config: CaptureConfig, progress, cancel, new_frames)
     if config.poses:
         path = Path(config.poses)
         result = import_transforms_json(path, records) if path.is_file() else import_colmap_model(path, records)
-        automatic_masks_ahead = config.masks == "automatic" or (config.masks == "auto" and not all(r.has_alpha for r in records))
-        if len(result.points) == 0 and automatic_masks_ahead:
+        if len(result.points) == 0 and _mask_mode(config, all(r.has_alpha for r in records)) == "automatic":
             # The automatic masks are seeded by sparse points, which a transforms.json does not hold.
-            pose_progress = (lambda stage, done, total: progress(f"points: {stage}", done, total)) if progress else None
             colmap = pose_with_colmap(records, capture.root, capture.root / "colmap", config=config.colmap,
-                                      progress=pose_progress, cancel=cancel)
+                                      progress=_substages(progress, "points"), cancel=cancel)
             result, note = points_in_imported_frame(result, colmap)
             capture.log("points for imported poses", note=note)
     else:
         work = capture.root / "colmap"
-        pose_progress = (lambda stage, done, total: progress(f"pose: {stage}", done, total)) if progress else None
+        pose_progress = _substages(progress, "pose")
         if new_frames and (work / "sparse").exists():
             new_records = [capture.frames[f].record for f in new_frames]
             result = extend_colmap_pose(work, new_records, capture.root, config=config.colmap, progress=pose_progress, cancel=cancel)
@@ -308,9 +306,7 @@ def _normalize(capture: Capture, config: CaptureConfig) -> None:
 def _masks(capture: Capture, config: CaptureConfig, progress, cancel) -> None:
     posed = sorted(capture.cameras)
     images = {f: capture.read_image(f) for f in posed}
-    mode = config.masks
-    if mode == "auto":
-        mode = "alpha" if all(images[f].shape[2] == 4 for f in posed) else "automatic"
+    mode = _mask_mode(config, all(images[f].shape[2] == 4 for f in posed))
     if mode == "alpha":
         missing = [f for f in posed if images[f].shape[2] != 4]
         if missing:
@@ -359,6 +355,14 @@ def _masks(capture: Capture, config: CaptureConfig, progress, cancel) -> None:
     _fit_world_to_masks(capture, config, {f: masks[f] for f in posed if f in masks}, trusted=source != "auto")
     capture.log("masks", source=source, ok=sum(capture.frames[f].mask_status == "ok" for f in posed))
     capture.save()
+
+
+def _mask_mode(config: CaptureConfig, all_have_alpha: bool) -> str:
+    """What the masks stage will do: "alpha", "automatic" or a folder (`--masks auto` takes the alpha
+    when every photo has one)."""
+    if config.masks == "auto":
+        return "alpha" if all_have_alpha else "automatic"
+    return config.masks
 
 
 def _mask_search_radius(config: CaptureConfig) -> float:
@@ -462,6 +466,11 @@ def _summary(capture: Capture) -> CaptureSummary:
 
 def _stage(progress: Progress | None, name: str):
     return (lambda done, total: progress(name, done, total)) if progress else None
+
+
+def _substages(progress: Progress | None, name: str):
+    """For a stage that reports its own parts (COLMAP: extract, match, map) as "name: part"."""
+    return (lambda part, done, total: progress(f"{name}: {part}", done, total)) if progress else None
 
 
 def _cancelled(cancel) -> bool:

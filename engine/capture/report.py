@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..lighting.capture_lighting import last_lighting_stage_entry
 from .pipeline import CaptureSummary
 
 
@@ -51,10 +52,9 @@ def format_capture_report(summary: CaptureSummary, reference: Path | None = None
 
 
 def _lighting_line(capture) -> str:
-    entries = [entry for entry in capture.history if entry.get("action") == "lighting"]
-    if not entries:
+    last = last_lighting_stage_entry(capture.history)
+    if last is None:
         return "  lighting as photographed: not estimated yet (`lirm capture --resume` estimates it)"
-    last = entries[-1]
     if not last.get("estimated"):
         return f"  lighting as photographed: none ({last.get('reason', 'no background')})"
     return (f"  lighting as photographed: {last['file']} from the backgrounds of {last['photos']} photos; "

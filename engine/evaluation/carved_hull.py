@@ -57,7 +57,6 @@ class CarvedHullState:
     updates: int = 0
 
 
-
 def object_mask(image: np.ndarray, background: np.ndarray) -> np.ndarray:
     """uint8 mask (255 = object) of a masked input: background pixels are the white fill where the
     background image is not white. Conservative: a pixel that could be either counts as object, so

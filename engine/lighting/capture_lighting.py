@@ -263,17 +263,24 @@ def load_capture_lighting(capture_root: str | Path) -> CaptureLighting | None:
                            info.get("proxy") == "support plane and sphere")
 
 
+def last_lighting_stage_entry(history: list) -> dict | None:
+    """The capture history's last word from the lighting stage (what it estimated, or why nothing),
+    None before the stage has run."""
+    said = [entry for entry in history if isinstance(entry, dict) and entry.get("action") == "lighting"]
+    return said[-1] if said else None
+
+
 def missing_lighting_reason(capture_root: str | Path) -> str:
-    """Why a capture has no estimate: what its lighting stage said (its last word in the capture's
-    history), or that the stage has not run yet."""
+    """Why a capture has no estimate: what its lighting stage said, or that the stage has not run yet
+    (and the command that runs it)."""
     try:
         history = json.loads((Path(capture_root) / "capture.json").read_text()).get("history", [])
     except (OSError, ValueError, AttributeError):
         return "its capture.json cannot be read"
-    said = [entry for entry in history if isinstance(entry, dict) and entry.get("action") == "lighting"]
-    if not said:
-        return "not estimated yet: `lirm capture --resume` estimates it"
-    return str(said[-1].get("reason") or "not estimated")
+    entry = last_lighting_stage_entry(history)
+    if entry is None:
+        return f"not estimated yet: `lirm capture --resume {capture_root}` estimates it from the photos' backgrounds"
+    return str(entry.get("reason") or "not estimated")
 
 
 def load_capture_lighting_info(capture_root: str | Path) -> dict | None:
