@@ -43,6 +43,7 @@ from lirm.engine.cameras import Camera
 from lirm.engine.capture.floor_parallax import floor_disagreement, nearest_views, off_floor_evidence
 from lirm.engine.capture.masks import check_mask
 from lirm.engine.capture.normalize import is_floor
+from lirm.engine.capture.plain_backdrop import BACKDROP, BACKDROP_COLOURED
 from lirm.engine.capture.visual_hull import (
     VoxelHull,
     carve_visual_hull,
@@ -143,6 +144,8 @@ class _Level:
     inside_ball: np.ndarray
     # Pixels that cannot be the floor (floor_parallax.py), or None where that is not known.
     off_floor: np.ndarray | None = None
+    # On a plain backdrop (plain_backdrop.py): the backdrop map at this level's size, else None.
+    backdrop: np.ndarray | None = None
 
 
 @dataclass
@@ -158,6 +161,17 @@ class _View:
     y1: int
     seed: _Level
     work: _Level
+
+
+def _attach_backdrop(view: "_View", backdrop: np.ndarray) -> None:
+    """The photo's backdrop map cropped and brought to both GrabCut sizes: definite backdrop only
+    where every photo pixel under a level's pixel is (an outline pixel mixes object and backdrop)."""
+    crop = np.asarray(backdrop)[view.y0:view.y1, view.x0:view.x1]
+    for level in (view.seed, view.work):
+        size = (level.camera.width, level.camera.height)
+        definite = cv2.resize((crop == BACKDROP).astype(np.float32), size, interpolation=cv2.INTER_AREA) > 0.999
+        coloured = cv2.resize((crop >= BACKDROP_COLOURED).astype(np.float32), size, interpolation=cv2.INTER_AREA) > 0.5
+        level.backdrop = np.where(definite, BACKDROP, np.where(coloured, BACKDROP_COLOURED, 0)).astype(np.uint8)
 
 
 def _odd_kernel(radius_px: float) -> np.ndarray:
@@ -316,10 +330,24 @@ def _seed_trimap(view: _View, seeds: _Seeds, radius: float, cfg: AutoMaskConfig)
     if view.y1 == view.full_h:
         border[-b:] = True
     tri[border & (tri != _BGD)] = _PR_BGD
+    _apply_backdrop(tri, lvl)
     if lvl.off_floor is not None:
         tri[lvl.off_floor & lvl.inside_ball] = _FGD
     _draw_seeds(tri, seeds, lvl, cfg)
     return tri
+
+
+def _apply_backdrop(tri: np.ndarray, level: _Level) -> None:
+    """On a plain backdrop: what is not the backdrop's colour inside the ball is probably object
+    (the points miss smooth parts, and the backdrop has nothing else to offer), the backdrop's
+    colour away from the border probably background (a gap of the object, or a part coloured like
+    the backdrop: the colour models and the hull decide), the backdrop joined to the border
+    definitely background."""
+    if level.backdrop is None:
+        return
+    tri[(level.backdrop == 0) & level.inside_ball & (tri != _FGD)] = _PR_FGD
+    tri[(level.backdrop == BACKDROP_COLOURED) & (tri == _PR_FGD)] = _PR_BGD
+    tri[level.backdrop == BACKDROP] = _BGD
 
 
 def _grabcut(
@@ -404,6 +432,8 @@ def _refine_trimap(
     tri[m] = _PR_FGD
     if cfg.refine_core_erosion > 0:
         tri[cv2.erode(m8, _odd_kernel(cfg.refine_core_erosion * long_side)) > 0] = _FGD
+    if level.backdrop is not None:
+        tri[level.backdrop == BACKDROP] = _BGD
     if level.off_floor is not None:
         tri[level.off_floor & level.inside_ball] = _FGD
     _draw_seeds(tri, seeds, level, cfg)
@@ -464,6 +494,7 @@ def automatic_masks(
     point_is_object: np.ndarray | None = None,
     support_plane: tuple[np.ndarray, float] | None = None,
     observations: Mapping[str, np.ndarray] | None = None,
+    backdrops: Mapping[str, np.ndarray] | None = None,
 ) -> dict[str, np.ndarray]:
     """Object masks (uint8, 255 = object, full image size) for every frame in both dicts.
 
@@ -475,7 +506,8 @@ def automatic_masks(
     of at the points' convex hull, which would also cut object parts that carry few points (a
     smooth handle). observations: optional frame id -> indices of the points that photo observed
     (SfM tracks); an observed point that is not the object is visible background in that photo,
-    wherever it lies (a wall behind a wall-mounted object). radius: the object lies inside
+    wherever it lies (a wall behind a wall-mounted object). backdrops: optional frame id -> backdrop
+    map (plain_backdrop.py) of photos shot on a plain backdrop. radius: the object lies inside
     this ball around the origin. progress(done, total) is called after each step of each view;
     raise from it to cancel. See the module docstring for the method and AutoMaskConfig for knobs.
     """
@@ -513,6 +545,9 @@ def automatic_masks(
         if img.ndim != 3 or img.shape[2] < 3 or img.dtype != np.uint8:
             raise ValueError(f"frame {f!r}: expected an RGB uint8 image, got {img.dtype} {img.shape}")
         views[f] = _prepare_view(f, np.ascontiguousarray(img[:, :, :3]), cameras[f], radius, cfg)
+    for f, backdrop in (backdrops or {}).items():
+        if f in views:
+            _attach_backdrop(views[f], backdrop)
     if floor_known:
         _attach_floor_evidence(views, images, cameras, support_plane, radius, cfg)
     for f in frames:
@@ -543,7 +578,9 @@ def automatic_masks(
                 )
                 if support_plane is not None:
                     cut_below_plane(hull, support_plane)
-                else:
+                elif not backdrops:
+                    # (On a plain backdrop every view outlines the object by itself; the points'
+                    # hull would cut what carries few of them, the lego's bucket.)
                     _trim_to_points(hull, pts, radius, cfg, labels)
                 if hull.is_empty:
                     hull = None

@@ -33,6 +33,9 @@ class NormalizeConfig:
     plane_tolerance: float = 0.01  # inlier distance, as a fraction of the median camera distance
     plane_min_fraction: float = 0.2  # of the points near the object, for a plane to count
     plane_iterations: int = 300
+    # False: no support plane is looked for (a capture on a plain backdrop, whose only plane among
+    # the points is the object's own base: plain_backdrop.py).
+    find_plane: bool = True
 
 
 @dataclass
@@ -142,7 +145,8 @@ def estimate_normalization(cameras: dict[str, Camera], points: np.ndarray | None
     if points is not None and len(points) >= config.min_points:
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         near = p[np.linalg.norm(p - center, axis=1) < config.core_fraction * camera_distance]
-        plane_source = find_support_plane(near, centres, config.plane_tolerance * camera_distance, config)
+        if config.find_plane:
+            plane_source = find_support_plane(near, centres, config.plane_tolerance * camera_distance, config)
         if plane_source is not None:
             normal, offset = plane_source
             # Off the plane by more than three times the tolerance, on the cameras' side.
