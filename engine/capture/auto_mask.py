@@ -16,6 +16,11 @@ Above a floor, pixels whose colour disagrees with what nearby views see at the f
 them are definite object (floor_parallax.py): parallax, evidence that colour models lack where the
 object is coloured like the floor (a cream neck on pale gravel).
 
+On a plain backdrop (plain_backdrop.py: a studio sweep, a lightbox), the backdrop joined to the
+photo's border is definite background and what is not the backdrop's colour inside the ball is
+probably object, whatever the points say; the points' convex hull does not trim the visual hull
+there (each view outlines the object by itself).
+
 This first pass runs small (a rough mask is all it must give). Then the views are made to agree:
 a visual hull carved from all first-pass masks (and, with points, cut to the points' convex hull)
 is projected back into each view, and a second GrabCut at the working size starts from the mask
@@ -48,6 +53,7 @@ from lirm.engine.capture.visual_hull import (
     VoxelHull,
     carve_visual_hull,
     cut_below_plane,
+    cut_outside_points,
     project_hull,
     project_points,
     sphere_silhouette,
@@ -442,28 +448,15 @@ def _refine_trimap(
 
 def _trim_to_points(hull: VoxelHull, points: np.ndarray, radius: float, cfg: AutoMaskConfig,
                     is_object: np.ndarray | None = None) -> None:
-    """Drop hull voxels outside the convex hull of the object's sparse points, grown by a margin.
-
-    Views that all look from one side (a capture of an object on a table) cannot carve what is
-    hidden behind the object, e.g. the space under it; the points bound the object there.
-    """
+    """Drop hull voxels outside the convex hull of the object's sparse points, grown by a margin
+    (visual_hull.cut_outside_points: views from one side cannot carve the space under the object)."""
     keep = np.linalg.norm(points, axis=1) <= radius
     if is_object is not None:
         keep &= is_object
     inner = points[keep]
     if cfg.point_hull_margin < 0 or len(inner) < max(cfg.min_fg_points, 4) or hull.is_empty:
         return
-    try:
-        from scipy.spatial import ConvexHull
-
-        eq = ConvexHull(inner).equations  # (F, 4): n . x + d <= 0 inside, n unit
-    except Exception:  # degenerate (flat or collinear) point sets: no bound
-        return
-    idx = np.argwhere(hull.occupancy)
-    c = hull.centers_of(idx)
-    outside = (c @ eq[:, :3].T + eq[:, 3]).max(axis=1) > cfg.point_hull_margin * radius
-    out = idx[outside]
-    hull.occupancy[out[:, 0], out[:, 1], out[:, 2]] = False
+    cut_outside_points(hull, inner, cfg.point_hull_margin * radius)
 
 
 def _upsample(view: _View, mask: np.ndarray, image: np.ndarray, cfg: AutoMaskConfig) -> np.ndarray:

@@ -8,6 +8,7 @@ reopens where it stopped (`resume_capture`). Frames keep their ids through every
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -22,7 +23,7 @@ from .auto_mask import AutoMaskConfig, automatic_masks
 from .plain_backdrop import BACKDROP, PlainBackdropConfig, plain_backdrop_capture
 from .pose_silhouettes import PoseSilhouetteConfig, views_against_silhouettes
 from .capture_folder import Capture, FrameState
-from .colmap_posing import ColmapConfig, extend_colmap_pose, pose_with_colmap
+from .colmap_posing import ColmapConfig, extend_colmap_pose, map_again_without, pose_with_colmap
 from .crop import CropConfig, EmptyMaskError, prepare_view
 from ..lighting.capture_lighting import CaptureLightingConfig, estimate_capture_lighting
 from .disk_space import require_free_space, stage_bytes
@@ -40,6 +41,8 @@ VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".webm", ".m4v")
 STAGES = ("ingest", "pose", "normalize", "masks", "crops")
 STAGE_WORDS = {"pose": "pose the photos (COLMAP)", "masks": "write the masks", "crops": "prepare the network's crops",
                "lighting": "estimate the lighting the photos were taken in"}
+
+log = logging.getLogger(__name__)
 
 Progress = Callable[[str, int, int], None]  # (stage, done, total)
 
@@ -290,30 +293,37 @@ def _normalize(capture: Capture, config: CaptureConfig) -> None:
     from lirm.engine.cameras import Camera
 
     source = {k: Camera.from_dict(v) for k, v in capture.settings.get("source_cameras", {}).items()}
+    # Every photo's (a view mapped again may register where it did not): the capture is on a plain
+    # backdrop or not whichever of its photos COLMAP posed.
+    backdrops = _plain_backdrop_maps(capture, config, list(capture.frames))
     normalize_config = config.normalize
-    backdrops = _plain_backdrop_maps(capture, config, list(source))
     if backdrops is not None:
         # Nothing on a plain backdrop is a floor: the plane the points hold is the object's base.
         normalize_config = replace(normalize_config, find_plane=False)
-    norm = estimate_normalization(source, capture.points if len(capture.points) else None, normalize_config)
-    if backdrops is not None:
-        # On a plain backdrop, what is not backdrop outlines the object in every photo before any
-        # mask; its hull sizes the world, as the masks' hull does for imported poses. Without it the
-        # lego's 50 views with their own poses (sized by the cameras alone until the masks' hull
-        # did it) were masked at IoU 0.741, with it 0.977 (README, "Captures").
-        norm = _size_by_outlines(norm, _backdrop_outlines(backdrops), source, config)
-    # Again after each round: sized without the views left out, the hull judges the rest better (the
-    # lego on white: 11 of its 14 wrong views in the first round, 2 more in the second).
-    for _ in range(3):
-        left_out = _views_against_outlines(capture, config, source, norm, backdrops)
-        if not left_out:
-            break
-        source = {k: c for k, c in source.items() if k not in left_out}
-        if backdrops is not None:
-            backdrops = {f: m for f, m in backdrops.items() if f in source}
+
+    def world(source: dict):
         norm = estimate_normalization(source, capture.points if len(capture.points) else None, normalize_config)
         if backdrops is not None:
-            norm = _size_by_outlines(norm, _backdrop_outlines(backdrops), source, config)
+            # On a plain backdrop, what is not backdrop outlines the object in every photo before any
+            # mask; its hull sizes the world, as the masks' hull does for imported poses. Without it
+            # the lego's 50 views with their own poses (sized by the cameras alone until the masks'
+            # hull did it) were masked at IoU 0.741, with it 0.977 (README, "Captures").
+            outlines = _backdrop_outlines({f: m for f, m in backdrops.items() if f in source})
+            norm = _size_by_outlines(norm, outlines, source, config)
+        return norm
+
+    norm = world(source)
+    # Again after each round: mapped and sized without the views left out, the hull judges the rest
+    # better (the lego on white: 11 of its 14 wrong views in the first round, 2 more in the second).
+    left_out_so_far: dict[str, float] = {}
+    for _ in range(3):
+        posed_backdrops = None if backdrops is None else {f: m for f, m in backdrops.items() if f in source}
+        left_out = _views_against_outlines(capture, config, source, norm, posed_backdrops, len(left_out_so_far))
+        if not left_out:
+            break
+        left_out_so_far.update(left_out)
+        source = _posed_without(capture, left_out_so_far, source)
+        norm = world(source)
     capture.normalization = norm
     capture.cameras = {k: norm.apply_to_camera(c) for k, c in source.items()}
     capture.points = norm.apply_to_points(capture.points) if len(capture.points) else capture.points
@@ -394,10 +404,11 @@ def _masks(capture: Capture, config: CaptureConfig, progress, cancel) -> None:
 LEFT_OUT = "left out:"  # how a view's pose status begins when its pose disagrees with the others' outlines
 
 
-def _views_against_outlines(capture: Capture, config: CaptureConfig, source: dict, norm, backdrops) -> dict[str, float]:
-    """Leave out the views structure from motion put on the wrong side of the object, where outlines
-    that need no pose show it (pose_silhouettes.py): a plain backdrop's, or the photos' alpha. The
-    views left out are unposed, with the reason, as a photo COLMAP could not register is."""
+def _views_against_outlines(capture: Capture, config: CaptureConfig, source: dict, norm, backdrops,
+                            earlier: int) -> dict[str, float]:
+    """The views structure from motion put on the wrong side of the object, where outlines that need
+    no pose show it (pose_silhouettes.py): a plain backdrop's, or the photos' alpha. `earlier`:
+    views earlier rounds left out."""
     if capture.settings.get("pose_source") != "colmap":
         return {}  # the user's own poses are taken as given
     if backdrops is not None:
@@ -410,20 +421,40 @@ def _views_against_outlines(capture: Capture, config: CaptureConfig, source: dic
         # Judged in a world sized by these outlines (a plain backdrop's world already is): sized by
         # points or by the cameras alone, the object may reach out of the ball the hull is carved in.
         norm = _size_by_outlines(norm, outlines, source, config)
-    earlier = sum(state.pose_status.startswith(LEFT_OUT) for state in capture.frames.values())
-    left_out = views_against_silhouettes(outlines, {f: norm.apply_to_camera(source[f]) for f in outlines},
-                                         _mask_search_radius(config), config.pose_silhouettes, already_left_out=earlier)
+    return views_against_silhouettes(outlines, {f: norm.apply_to_camera(source[f]) for f in outlines},
+                                     _mask_search_radius(config), config.pose_silhouettes, already_left_out=earlier)
+
+
+def _posed_without(capture: Capture, left_out: dict[str, float], source: dict) -> dict:
+    """The capture posed without the views `left_out` (frame -> share of its outline outside the
+    others' hull): COLMAP maps its matches again without them (colmap_posing.map_again_without);
+    should that lose more than a tenth of the other views, the first posing is kept and only the
+    views and the points only they saw are dropped. Each view left out is unposed, with the reason.
+    Returns the source cameras now posed."""
+    kept = len(source) - len(set(left_out) & set(source))
+    result = None
+    if (capture.root / "colmap").is_dir():
+        try:
+            result = map_again_without(capture.root / "colmap", sorted(left_out), capture.records)
+        except LirmUserError as e:
+            log.warning("could not map the photos again without the views left out: %s", e)
+    if result is not None and len(result.cameras) >= 0.9 * kept:
+        _apply_posing(capture, result)
+        source = dict(capture.cameras)
+    else:
+        source = {f: c for f, c in source.items() if f not in left_out}
+        for f in left_out:
+            capture.settings["source_cameras"].pop(f, None)
+            capture.observations.pop(f, None)
+        _keep_points_seen_by_posed_views(capture)
     for f, share in left_out.items():
         capture.frames[f].pose_status = (
-            f"{LEFT_OUT} its pose disagrees with the other photos' outlines ({100 * share:.0f}% of the object's "
-            "outline falls where the others see none); structure from motion likely put it on the wrong side of "
-            "an object that looks alike from opposite sides")
-        capture.settings["source_cameras"].pop(f, None)
-        capture.observations.pop(f, None)
-    if left_out:
-        _keep_points_seen_by_posed_views(capture)
-        capture.log("poses against outlines", left_out={f: round(v, 3) for f, v in left_out.items()})
-    return left_out
+            f"{LEFT_OUT} its pose disagreed with the other photos' outlines ({100 * share:.0f}% of the object's "
+            "outline fell where they see none): structure from motion likely put it on the wrong side of an object "
+            "that looks alike from two sides")
+    capture.log("poses against outlines", left_out={f: round(v, 3) for f, v in left_out.items()},
+                mapped_again=result is not None and len(result.cameras) >= 0.9 * kept)
+    return source
 
 
 def _keep_points_seen_by_posed_views(capture: Capture) -> None:
@@ -441,9 +472,13 @@ def _keep_points_seen_by_posed_views(capture: Capture) -> None:
 
 def _size_by_outlines(norm, outlines: dict[str, np.ndarray], source: dict, config: CaptureConfig):
     """`norm` moved so that the hull of `outlines` (uint8, the photos' sizes, non-zero on the object;
-    in the source cameras' images) fills the ball (fit_to_silhouettes.py)."""
+    in the source cameras' images) fills the ball (fit_to_silhouettes.py). Every outline carves (a
+    backdrop's or an alpha's is the object's own, a little fat if anything): with the automatic
+    masks' tolerance of a few disagreeing views, the lego's 30 views on white left a hull reaching
+    0.7 from the origin where the object ended at 0.1, and the world was sized to that."""
     fit = size_world_from_silhouettes(outlines, {f: norm.apply_to_camera(source[f]) for f in outlines},
-                                      config.normalize.target_radius, config.normalize.fill, _mask_search_radius(config))
+                                      config.normalize.target_radius, config.normalize.fill, _mask_search_radius(config),
+                                      trusted_masks=True)
     if fit is None or not fit.moved:
         return norm
     return moved_normalization(norm, fit.scale, fit.shift)

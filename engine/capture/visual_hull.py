@@ -21,8 +21,8 @@ import numpy as np
 
 from lirm.engine.cameras import Camera, undistort_normalized
 
-__all__ = ["VOXEL_HALF_DIAGONAL", "VoxelHull", "carve_visual_hull", "cut_below_plane", "project_hull", "project_points",
-           "sphere_silhouette"]
+__all__ = ["VOXEL_HALF_DIAGONAL", "VoxelHull", "carve_visual_hull", "cut_below_plane", "cut_outside_points",
+           "project_hull", "project_points", "sphere_silhouette"]
 
 # Half the space diagonal of a unit cube: a voxel of size s fits in a ball of radius 0.866 s.
 VOXEL_HALF_DIAGONAL = math.sqrt(3.0) / 2.0
@@ -275,6 +275,28 @@ def cut_below_plane(hull: VoxelHull, plane: tuple[np.ndarray, float], margin_vox
         return
     below = idx[hull.centers_of(idx) @ normal - offset < margin_voxels * hull.voxel_size]
     hull.occupancy[below[:, 0], below[:, 1], below[:, 2]] = False
+
+
+def cut_outside_points(hull: VoxelHull, points: np.ndarray, margin: float) -> bool:
+    """Drop hull voxels farther than `margin` (world units) outside the convex hull of `points`.
+
+    Views that all look from one side (an object on a table, photographed from above) cannot carve
+    what is hidden behind the object, the space under it; the sparse points bound the object
+    there. Returns False, cutting nothing, for too few or degenerate (flat, collinear) points."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(pts) < 4 or hull.is_empty:
+        return False
+    try:
+        from scipy.spatial import ConvexHull
+
+        eq = ConvexHull(pts).equations  # (F, 4): n . x + d <= 0 inside, n unit
+    except Exception:  # degenerate point sets: no bound
+        return False
+    idx = np.argwhere(hull.occupancy)
+    outside = (hull.centers_of(idx) @ eq[:, :3].T + eq[:, 3]).max(axis=1) > margin
+    out = idx[outside]
+    hull.occupancy[out[:, 0], out[:, 1], out[:, 2]] = False
+    return True
 
 
 def _splat_discs(shape: tuple[int, int], xy: np.ndarray, radii: np.ndarray) -> np.ndarray:

@@ -24,6 +24,7 @@ from lirm.engine.capture.colmap_posing import (
     ColmapConfig,
     camera_from_colmap,
     extend_colmap_pose,
+    map_again_without,
     intrinsics_from_colmap,
     pose_with_colmap,
     read_colmap_work_dir,
@@ -153,6 +154,25 @@ def test_extend_registers_added_photos_without_moving_the_others(fox20, shared_d
     assert max(e["rotation_deg"][f] for f in ("0021", "0022", "0023")) < 1.0
     # Adding the same photos again changes nothing.
     assert extend_colmap_pose(work, new, fox20.root).registered == res.registered
+
+
+@pytest.mark.slow
+def test_mapping_again_without_some_views(fox20, shared_data, tmp_path):
+    """The views left out are no longer posed; the rest are, where the capture's calibration puts
+    them, from the matches already in the database (no extraction or matching again)."""
+    work = tmp_path / "colmap"
+    shutil.copytree(fox20.root / "colmap", work)
+    t0 = time.perf_counter()
+    res = map_again_without(work, ["0004", "0011"], fox20.records)
+    print(f"\nmapped again without 2 views: {len(res.cameras)}/18 registered in {time.perf_counter() - t0:.1f} s")
+    assert res.registered == [r.frame_id for r in fox20.records if r.frame_id not in ("0004", "0011")]
+    assert res.status["0004"] != STATUS_REGISTERED and res.status["0011"] != STATUS_REGISTERED
+    ref = import_transforms_json(shared_data / "real_instantngp_fox" / "transforms.json", fox20.records)
+    e = pose_errors(res.cameras, ref.cameras)
+    assert e["rotation_deg_max"] < 1.0 and e["center_error_median"] < 0.01
+    # The saved model is the new one: reading the folder back gives the same posing.
+    assert read_colmap_work_dir(work).registered == res.registered
+    assert all(max(idx) < len(res.points) for idx in res.observations.values())
 
 
 def test_unrelated_photos_get_a_reason(shared_data, tmp_path):

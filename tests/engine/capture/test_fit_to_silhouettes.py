@@ -110,3 +110,20 @@ def test_a_world_sized_from_the_cameras_alone_is_sized_from_the_masks():
         assert 0.7 < reach < 0.9, (guess, reach)  # inside the ball, near fill * R: the hull is a voxel fatter
         assert np.linalg.norm(to_world(middle)) < 0.1, guess
     assert size_world_from_silhouettes(dict(list(masks.items())[:2]), cameras, 1.0, 0.85, 1.0 / 0.85) is None
+
+
+
+def test_stray_voxels_do_not_size_the_world():
+    """Where few views overlap, a few voxels can survive the carving far from the object; the
+    object's own pieces stay, down to a twentieth of the largest."""
+    from lirm.engine.capture.fit_to_silhouettes import _drop_specks
+    from lirm.engine.capture.visual_hull import VoxelHull
+
+    grid = np.zeros((40, 40, 40), bool)
+    grid[10:20, 10:20, 10:20] = True  # the object, 1000 voxels
+    grid[25:29, 10:20, 10:14] = True  # a separate part of it, 160 voxels
+    grid[35, 35, 35] = grid[2, 30, 5] = True  # strays
+    hull = VoxelHull(grid.copy(), 1.0)
+    _drop_specks(hull)
+    assert hull.num_occupied == 1160
+    assert not hull.occupancy[35, 35, 35] and not hull.occupancy[2, 30, 5]
