@@ -169,7 +169,7 @@ class _View:
     work: _Level
 
 
-def _attach_backdrop(view: "_View", backdrop: np.ndarray) -> None:
+def _attach_backdrop(view: _View, backdrop: np.ndarray) -> None:
     """The photo's backdrop map cropped and brought to both GrabCut sizes: definite backdrop only
     where every photo pixel under a level's pixel is (an outline pixel mixes object and backdrop)."""
     crop = np.asarray(backdrop)[view.y0:view.y1, view.x0:view.x1]

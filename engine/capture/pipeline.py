@@ -296,6 +296,8 @@ def _normalize(capture: Capture, config: CaptureConfig) -> None:
     # Every photo's (a view mapped again may register where it did not): the capture is on a plain
     # backdrop or not whichever of its photos COLMAP posed.
     backdrops = _plain_backdrop_maps(capture, config, list(capture.frames))
+    capture.settings["plain_backdrop"] = backdrops is not None  # the masks stage goes by it
+    outlines = _outlines_without_poses(capture, config, backdrops)
     normalize_config = config.normalize
     if backdrops is not None:
         # Nothing on a plain backdrop is a floor: the plane the points hold is the object's base.
@@ -308,8 +310,7 @@ def _normalize(capture: Capture, config: CaptureConfig) -> None:
             # mask; its hull sizes the world, as the masks' hull does for imported poses. Without it
             # the lego's 50 views with their own poses (sized by the cameras alone until the masks'
             # hull did it) were masked at IoU 0.741, with it 0.977 (README, "Captures").
-            outlines = _backdrop_outlines({f: m for f, m in backdrops.items() if f in source})
-            norm = _size_by_outlines(norm, outlines, source, config)
+            norm = _size_by_outlines(norm, {f: o for f, o in outlines.items() if f in source}, source, config)
         return norm
 
     norm = world(source)
@@ -317,8 +318,8 @@ def _normalize(capture: Capture, config: CaptureConfig) -> None:
     # better (the lego on white: 11 of its 14 wrong views in the first round, 2 more in the second).
     left_out_so_far: dict[str, float] = {}
     for _ in range(3):
-        posed_backdrops = None if backdrops is None else {f: m for f, m in backdrops.items() if f in source}
-        left_out = _views_against_outlines(capture, config, source, norm, posed_backdrops, len(left_out_so_far))
+        left_out = _views_against_outlines(capture, config, source, norm, outlines, sized=backdrops is not None,
+                                           earlier=len(left_out_so_far))
         if not left_out:
             break
         left_out_so_far.update(left_out)
@@ -358,7 +359,10 @@ def _masks(capture: Capture, config: CaptureConfig, progress, cancel) -> None:
         is_object = None
         mask_config = config.auto_mask
         plane = None if capture.normalization is None else capture.normalization.plane
-        backdrops = _plain_backdrop_maps(capture, config, posed, rgb)
+        # Found again on the undistorted images the masks are made on, unless normalisation found the
+        # capture not plain (older captures did not record it).
+        no_backdrop = capture.settings.get("plain_backdrop") is False
+        backdrops = None if no_backdrop else _plain_backdrop_maps(capture, config, posed, rgb)
         if backdrops is not None:
             # A plain backdrop has no features, so whatever plane the points hold is the object's own
             # base (the lego's plate), not a floor to leave out of the masks (plain_backdrop.py).
@@ -404,24 +408,31 @@ def _masks(capture: Capture, config: CaptureConfig, progress, cancel) -> None:
 LEFT_OUT = "left out:"  # how a view's pose status begins when its pose disagrees with the others' outlines
 
 
-def _views_against_outlines(capture: Capture, config: CaptureConfig, source: dict, norm, backdrops,
-                            earlier: int) -> dict[str, float]:
-    """The views structure from motion put on the wrong side of the object, where outlines that need
-    no pose show it (pose_silhouettes.py): a plain backdrop's, or the photos' alpha. `earlier`:
-    views earlier rounds left out."""
-    if capture.settings.get("pose_source") != "colmap":
-        return {}  # the user's own poses are taken as given
+def _outlines_without_poses(capture: Capture, config: CaptureConfig, backdrops) -> dict[str, np.ndarray] | None:
+    """The object's outline in every photo, known without any pose (uint8, non-zero on the object, in
+    the working images before undistortion): what is not a plain backdrop, or, for photos COLMAP
+    posed that bring their own alpha, the alpha; None otherwise."""
     if backdrops is not None:
-        outlines = _backdrop_outlines(backdrops)
-    elif _mask_mode(config, all(capture.frames[f].record.has_alpha for f in source)) == "alpha":
-        outlines = {f: mask_from_alpha(capture.read_image(f, pinhole=False)) for f in source}
-    else:
-        return {}
-    if backdrops is None:
-        # Judged in a world sized by these outlines (a plain backdrop's world already is): sized by
-        # points or by the cameras alone, the object may reach out of the ball the hull is carved in.
-        norm = _size_by_outlines(norm, outlines, source, config)
-    return views_against_silhouettes(outlines, {f: norm.apply_to_camera(source[f]) for f in outlines},
+        return _backdrop_outlines(backdrops)
+    if (capture.settings.get("pose_source") == "colmap"
+            and _mask_mode(config, all(state.record.has_alpha for state in capture.frames.values())) == "alpha"):
+        return {f: mask_from_alpha(capture.read_image(f, pinhole=False)) for f in capture.frames}
+    return None
+
+
+def _views_against_outlines(capture: Capture, config: CaptureConfig, source: dict, norm, outlines, sized: bool,
+                            earlier: int) -> dict[str, float]:
+    """The views structure from motion put on the wrong side of the object, shown by `outlines`
+    (`_outlines_without_poses`; pose_silhouettes.py). `sized`: the world `norm` is already sized by
+    them. `earlier`: views earlier rounds left out."""
+    if capture.settings.get("pose_source") != "colmap" or outlines is None:
+        return {}  # the user's own poses are taken as given
+    posed = {f: o for f, o in outlines.items() if f in source}
+    if not sized:
+        # Sized by points or by the cameras alone, the object may reach out of the ball the hull is
+        # carved in.
+        norm = _size_by_outlines(norm, posed, source, config)
+    return views_against_silhouettes(posed, {f: norm.apply_to_camera(source[f]) for f in posed},
                                      _mask_search_radius(config), config.pose_silhouettes, already_left_out=earlier)
 
 
@@ -438,7 +449,8 @@ def _posed_without(capture: Capture, left_out: dict[str, float], source: dict) -
             result = map_again_without(capture.root / "colmap", sorted(left_out), capture.records)
         except LirmUserError as e:
             log.warning("could not map the photos again without the views left out: %s", e)
-    if result is not None and len(result.cameras) >= 0.9 * kept:
+    mapped_again = result is not None and len(result.cameras) >= 0.9 * kept
+    if mapped_again:
         _apply_posing(capture, result)
         source = dict(capture.cameras)
     else:
@@ -453,7 +465,7 @@ def _posed_without(capture: Capture, left_out: dict[str, float], source: dict) -
             "outline fell where they see none): structure from motion likely put it on the wrong side of an object "
             "that looks alike from two sides")
     capture.log("poses against outlines", left_out={f: round(v, 3) for f, v in left_out.items()},
-                mapped_again=result is not None and len(result.cameras) >= 0.9 * kept)
+                mapped_again=mapped_again)
     return source
 
 

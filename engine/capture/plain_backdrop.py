@@ -87,11 +87,7 @@ def _fit_field(lab: np.ndarray, strip: np.ndarray, tolerance: float) -> tuple[np
             return coeffs, 0.0
         coeffs, *_ = np.linalg.lstsq(basis[keep], colours[keep], rcond=None)
         residual = np.linalg.norm(basis @ coeffs - colours, axis=1)
-        if round_ == 0:
-            keep = residual <= np.quantile(residual, 0.7)
-        else:
-            keep = residual <= 2.0 * tolerance
-    residual = np.linalg.norm(basis @ coeffs - colours, axis=1)
+        keep = residual <= (np.quantile(residual, 0.7) if round_ == 0 else 2.0 * tolerance)
     return coeffs, float(np.mean(residual < tolerance))
 
 
