@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from imgui_bundle import imgui
 
-from .common import coloured, job_progress
+from .common import coloured, job_progress, short_status
 
 
 class CapturePanel:
@@ -86,9 +86,12 @@ class CapturePanel:
                     imgui.set_tooltip(f"{f.name}\nview {f.frame_id}; pose: {'posed' if f.posed else f.pose_status}; "
                                       f"mask: {f.mask_status}; {used}\n(click to see its mask and redo it with a box)")
                 imgui.table_next_column()
-                coloured("posed" if f.posed else f.pose_status, "ok" if f.posed else "warning")
+                pose = "posed" if f.posed else f.pose_status
+                coloured(("posed" if f.posed else short_status(pose) or "not posed"), "ok" if f.posed else "warning")
+                _whole_on_hover(f.name, "pose", pose)
                 imgui.table_next_column()
-                coloured(f.mask_status, "ok" if f.mask_status == "ok" else "warning")
+                coloured(short_status(f.mask_status) or "not usable", "ok" if f.mask_status == "ok" else "warning")
+                _whole_on_hover(f.name, "mask", f.mask_status)
                 imgui.table_next_column()
                 imgui.text("" if f.update is None else str(f.update))
             imgui.end_table()
@@ -131,3 +134,9 @@ class CapturePanel:
             if imgui.button("Fix the mask with this box"):
                 app.actions.fix_mask_with_box(frame_id, tuple(v / scale for v in self.box))
                 self.box = None
+
+
+def _whole_on_hover(name: str, what: str, status: str) -> None:
+    """The cell shows a status's head; hovering it gives the whole reason."""
+    if imgui.is_item_hovered(imgui.HoveredFlags_.for_tooltip):
+        imgui.set_tooltip(f"{name}\n{what}: {status}")

@@ -21,3 +21,13 @@ def job_progress(job: Job, cancel) -> None:
 
 def coloured(text: str, level: str) -> None:
     imgui.text_colored(COLOURS.get(level, COLOURS["info"]), text)
+
+
+def short_status(status: str, longest: int = 16) -> str:
+    """A status's head for a narrow table column: the words before its reason ("left out: its pose
+    disagreed ..." -> "left out", "not registered (too few ...)" -> "not registered"). Where even the
+    head is long it says only that something is wrong ("not posed" / "not usable"), since one long
+    reason in a fitted column took the whole width and cut every photo's name to two letters; the
+    whole reason is the cell's tooltip."""
+    head = status.split(":", 1)[0].split(" (", 1)[0].strip()
+    return head if 0 < len(head) <= longest else ""

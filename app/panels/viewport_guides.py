@@ -28,7 +28,7 @@ def nice_length(target: float) -> float:
 
 def format_length(value: float, metres: bool) -> str:
     if not metres:
-        return f"{value:g} units"
+        return f"{value:g} unit" if value == 1 else f"{value:g} units"
     if value >= 1.0:
         return f"{value:g} m"
     if value >= 0.01:

@@ -1,0 +1,61 @@
+"""The Capture panel's list of views in a real window: a photo that failed says so in a word, its
+whole reason on hover, and the photos' names keep their room. Before, one unposed photo's reason
+(a couple of hundred characters since the poses are checked against the outlines) widened the
+pose column to its length and cut every photo's name to two letters."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from lirm.app.panels.common import short_status
+from lirm.engine.capture.colmap_posing import STATUS_NOT_REGISTERED, STATUS_SEPARATE_MODEL
+from lirm.engine.capture.pipeline import LEFT_OUT
+
+LONG_REASON = (f"{LEFT_OUT} its pose disagreed with the other photos' outlines (31% of the object's outline fell where "
+               "they see none): structure from motion likely put it on the wrong side of an object that looks alike "
+               "from two sides")
+
+
+def test_a_status_is_cut_to_its_head():
+    assert short_status(LONG_REASON) == "left out"
+    assert short_status(STATUS_NOT_REGISTERED) == "not registered"
+    assert short_status("missing: the mask file was deleted") == "missing"
+    assert short_status("ok") == "ok" and short_status("empty: no object found in this view") == "empty"
+    # A head that is itself long says nothing rather than half a sentence ("registered in a ..."),
+    # and the panel then shows its own word for a failure.
+    assert short_status(STATUS_SEPARATE_MODEL) == "" and short_status("") == ""
+
+
+@pytest.mark.display
+@pytest.mark.slow
+def test_unposed_views_leave_the_names_their_room(lego_capture, tmp_path, x_display):
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    data = json.loads((capture / "capture.json").read_text())
+    left_out = data["frames"][-1]["frame_id"]
+    data["frames"][-1]["pose_status"] = LONG_REASON
+    data["cameras"].pop(left_out)
+    (capture / "prepared" / f"{left_out}.npz").unlink()
+    data["frames"][-2]["mask_status"] = "touches the border on all four sides: it probably includes background"
+    (capture / "capture.json").write_text(json.dumps(data))
+    script = {"out": str(tmp_path / "out"), "steps": [
+        {"frames": 2}, {"action": "open_capture", "args": [str(capture)]}, {"frames": 3},
+        {"report_widgets": True}, {"screenshot": "views"}, {"quit": True}]}
+    (tmp_path / "script.json").write_text(json.dumps(script))
+    env = dict(os.environ, DISPLAY=x_display, XDG_CONFIG_HOME=str(tmp_path / "config"))
+    proc = subprocess.run([sys.executable, "-m", "lirm.engine.cli", "app", "--new", "--script", str(tmp_path / "script.json")],
+                          env=env, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    result = json.loads((tmp_path / "out" / "script_result.json").read_text())
+    assert result["errors"] == [], result["errors"]
+    names = {k: v for k, v in result["widgets"].items() if k.startswith("view_")}
+    assert len(names) == len(data["frames"]), sorted(names)
+    widths = [x1 - x0 for x0, _, x1, _ in names.values()]
+    # "r_35.png" is about 60 pixels in the app's font; the long reason had left the column 14.
+    assert min(widths) >= 80, widths
