@@ -25,6 +25,7 @@ from .pose_silhouettes import PoseSilhouetteConfig, views_against_silhouettes
 from .capture_folder import Capture, FrameState
 from .colmap_posing import ColmapConfig, extend_colmap_pose, map_again_without, pose_with_colmap
 from .crop import CropConfig, EmptyMaskError, prepare_view
+from ..lighting.camera_response import RESPONSES, response_for_capture
 from ..lighting.capture_lighting import CaptureLightingConfig, estimate_capture_lighting
 from .disk_space import require_free_space, stage_bytes
 from .ingest import Cancelled, IngestConfig, ingest_photos, natural_key
@@ -59,6 +60,8 @@ class CaptureConfig:
     crop: CropConfig = field(default_factory=CropConfig)
     lighting: CaptureLightingConfig = field(default_factory=CaptureLightingConfig)
     masks: str = "auto"  # auto (alpha where every image has it, else automatic) | alpha | automatic | a folder
+    # The photos' tone curve: auto (camera_response.response_for_capture) | aces | srgb
+    camera_response: str = "auto"
     poses: str | None = None  # a transforms.json or COLMAP model folder to use instead of structure from motion
 
 
@@ -585,9 +588,18 @@ def _lighting(capture: Capture, config: CaptureConfig, cancel) -> None:
         mask = capture.read_mask(f)
         if mask is not None:
             images[f], masks[f] = capture.read_image(f), mask
+    plane = capture.normalization.plane if capture.normalization is not None else None
+    plain_backdrop = bool(capture.settings.get("plain_backdrop"))
     try:
-        plane = capture.normalization.plane if capture.normalization is not None else None
-        lighting = estimate_capture_lighting(images, masks, capture.cameras, config.lighting, cancel=cancel, support_plane=plane)
+        # Clipping is judged on the display values, whatever the curve: estimate once, then again
+        # through the curve the clipped share chooses (about 2 s).
+        first = config.camera_response if config.camera_response in RESPONSES else "aces"
+        lighting = estimate_capture_lighting(images, masks, capture.cameras, replace(config.lighting, response=first),
+                                             cancel=cancel, support_plane=plane)
+        response, why = response_for_capture(config.camera_response, plain_backdrop, lighting.clipped_fraction)
+        if response != first:
+            lighting = estimate_capture_lighting(images, masks, capture.cameras, replace(config.lighting, response=response),
+                                                 cancel=cancel, support_plane=plane)
     except InterruptedError as error:
         raise Cancelled(str(error)) from error
     except ValueError as error:
@@ -596,7 +608,8 @@ def _lighting(capture: Capture, config: CaptureConfig, cancel) -> None:
         return
     path = lighting.save(capture.root)
     capture.log("lighting", estimated=True, file=str(path.relative_to(capture.root)), photos=lighting.photos_used,
-                seen=round(lighting.seen_fraction, 3), clipped=round(lighting.clipped_fraction, 3))
+                seen=round(lighting.seen_fraction, 3), clipped=round(lighting.clipped_fraction, 3),
+                camera_response=response, camera_response_why=why)
     capture.save()
 
 

@@ -59,7 +59,8 @@ def _lighting_line(capture) -> str:
         return f"  lighting as photographed: none ({last.get('reason', 'no background')})"
     return (f"  lighting as photographed: {last['file']} from the backgrounds of {last['photos']} photos; "
             f"{100 * last['seen']:.0f}% of directions seen (the rest filled smoothly, not measured), "
-            f"{100 * last['clipped']:.0f}% of the seen ones clipped")
+            f"{100 * last['clipped']:.0f}% of the seen ones clipped"
+            + (f"; the photos read as plain sRGB ({last.get('camera_response_why')})" if last.get("camera_response") == "srgb" else ""))
 
 
 def _reference_errors(capture, reference: Path) -> str:

@@ -30,6 +30,10 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--undo-fix-mask", action="store_true", help="INPUTS is a capture: put back the masks the last --fix-mask replaced")
     parser.add_argument("--poses", help="use known poses: a transforms.json (NeRF, instant-ngp, nerfstudio) or a COLMAP model folder")
     parser.add_argument("--masks", default="auto", help="auto (alpha if every photo has one, else automatic), alpha, automatic, or a folder of masks")
+    parser.add_argument("--camera-response", choices=("auto", "aces", "srgb"), default="auto",
+                        help="the tone curve the photos are read through for their lighting and materials: aces (the "
+                        "app's display transform), srgb (a plain decode), or auto (default): aces, but srgb for a "
+                        "plain backdrop photographed clipped (a white sweep exposed to pure white)")
     parser.add_argument("--max-side", type=int, default=1280, help="long side of the working images (default 1280)")
     parser.add_argument("--size", type=int, default=256, help="side of the network's square crops (default 256)")
     parser.add_argument("--reference", type=Path, help="report pose errors against this transforms.json (for known test scenes)")
@@ -53,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     elif not (args.fix_mask or args.check or args.undo_fix_mask) and args.out is not None:
         check_output(args.out, "the capture folder (-o)", folder=True)
     check_memory(args, [("--size", CAPTURE_SIZE, crop_bytes)])
-    config = CaptureConfig(masks=args.masks, poses=args.poses)
+    config = CaptureConfig(masks=args.masks, poses=args.poses, camera_response=args.camera_response)
     config = replace(config, ingest=replace(config.ingest, max_side=args.max_side, copy_originals=not args.reference_originals),
                      crop=replace(config.crop, size=args.size))
     source: str | int = args.inputs

@@ -65,6 +65,7 @@ def texture_fit_inputs(capture: Capture, entry: dict):
         return None
     environment = load_environment_file(lighting_file)
     lighting = PanoramaLighting.from_environment(environment, environment.radiance.shape[0])
+    lighting.camera_response = entry.get("camera_response", "aces")  # refinements before it was recorded: ACES
     photos = PhotoViews([v.camera for v in views], np.stack([v.image_masked for v in views]), np.stack([v.mask for v in views]))
     return photos, lighting
 

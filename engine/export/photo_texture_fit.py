@@ -315,6 +315,7 @@ class _Shading:
                                                                                config.lighting_levels)
         self.reads: TexelReads | None = None  # made at the first step, when the textures' size is known
         self.clip_level = config.clip_level
+        self.camera_response = lighting.camera_response  # the photos' tone curve, as the refinement had it
         self.use_colour(samples.colour)
 
     def use_colour(self, colour: torch.Tensor) -> None:
@@ -340,7 +341,7 @@ class _Shading:
         shaded = self.light.shade(read[:, :3], read[:, 3], read[:, 4]).radiance
         if samples.footprint > 1:  # the pixel integrates its footprint in linear light
             shaded = shaded.reshape(-1, samples.footprint, 3).mean(1)
-        predicted = radiance_to_display_torch(shaded)
+        predicted = radiance_to_display_torch(shaded, self.camera_response)
         difference = predicted - colour
         if clipped is not None:  # (the tone curve never reaches 1: a clipped value is compared with the level)
             difference = torch.where(clipped, (self.clip_level - predicted).clamp(min=0.0), difference)

@@ -68,3 +68,29 @@ def radiance_to_display_torch(radiance, response: str = "aces"):
         c = (a / b) @ m_out.T
     c = c.clamp(0.0, 1.0)
     return torch.where(c <= 0.0031308, 12.92 * c, 1.055 * c.clamp(min=0.0031308) ** (1.0 / 2.4) - 0.055)
+
+
+# A plain backdrop clipped in at least this share of the directions the photos saw it in makes the
+# capture's camera plain sRGB (`response_for_capture`).
+CLIPPED_BACKDROP_SHARE = 0.5
+
+
+def response_for_capture(requested: str, plain_backdrop: bool, clipped_share: float) -> tuple[str, str]:
+    """The tone curve a capture's photos are read through, and why (for the report).
+
+    "auto" is the product's ACES curve, except for a plain backdrop photographed clipped: a white
+    sweep or lightbox exposed to pure white, the usual product shot. Through the ACES curve a pixel at
+    250/255 is 7 times the radiance of one at 200/255 and at 255/255 26 times, so such a backdrop
+    reads as a light of 7-26 around an object of about 1, and the refinement explains the object's
+    colour with a dark albedo under it (the lego's 50 photos on white: its yellow and grey came out
+    brown and black, the plate metallic and fully rough). A camera's JPEG curve rolls its highlights
+    off far more gently than the ACES fit, and the backdrop is often lit apart and over-exposed on
+    purpose, so there the plain sRGB decode is the nearer model (the backdrop reads as 1)."""
+    if requested in RESPONSES:
+        return requested, "as asked"
+    if requested != "auto":
+        raise ValueError(f"unknown camera response {requested!r}; choose auto or one of {', '.join(RESPONSES)}")
+    if plain_backdrop and clipped_share >= CLIPPED_BACKDROP_SHARE:
+        return "srgb", (f"a plain backdrop clipped in {100 * clipped_share:.0f}% of what the photos saw: read as a "
+                        "camera's plain sRGB, not the ACES curve")
+    return "aces", "the product's display transform (ACES)"

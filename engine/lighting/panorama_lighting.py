@@ -47,6 +47,9 @@ class PanoramaLighting(torch.nn.Module):
         # 0: the smoothness term is the plain total variation of the log radiance; above 0, a step of
         # log contrast d costs scale * log(1 + d / scale) (`smoothness_loss`).
         self.smoothness_scale = float(smoothness_scale)
+        # The camera's tone curve that the photos shaded under this light are compared through
+        # (camera_response.RESPONSES): the one the capture's estimate was read with.
+        self.camera_response = "aces"
         height, width = log_radiance.shape[:2]
         self.log_radiance = torch.nn.Parameter(log_radiance.clone().float())
         # The texel grid of an environment of this size (its one definition: renderer/environment.py).
@@ -90,6 +93,7 @@ class PanoramaLighting(torch.nn.Module):
         and keeps what the photos saw as an observation (`observation_loss`); clipped texels are
         lower bounds only."""
         panorama = cls.from_environment(lighting.environment, height, sharpest_lobe_texels, light_lobes, smoothness_scale)
+        panorama.camera_response = lighting.config.response
         env = lighting.environment
         seen = (lighting.observed > 0).astype(np.float64)
         clipped = seen * lighting.clipped

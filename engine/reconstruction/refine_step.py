@@ -209,6 +209,8 @@ def _refine_locked(capture_dir, source: ModelSource, config: RefineConfig, init:
         entry = {"update": number, "kind": "refine", "frames": fitted, "held_out": held,
                  "started_from": started_from, "seconds": round(result.seconds, 2), "steps": result.steps,
                  "weights": source.description, "trained": source.trained, "state": state_path}
+        if lighting is not None:  # the export's texture fit compares through the same tone curve
+            entry["camera_response"] = lighting.camera_response
         log = {"time": time.strftime("%Y-%m-%dT%H:%M:%S"), "action": "refine", "update": number,
                "started_from": started_from, "seconds": round(result.seconds, 2), "steps": result.steps,
                "stopped": result.stopped}

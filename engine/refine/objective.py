@@ -59,7 +59,7 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
                                              shared_albedo=weights.shared_albedo > 0,
                                              light_neutral=weights.light_neutral > 0))
         if weights.albedo_pairs and pairs is not None and pairs.shape[0]:
-            terms["albedo_pairs"] = paired_albedo_smoothness(render, colours, alphas, pairs)
+            terms["albedo_pairs"] = paired_albedo_smoothness(render, colours, alphas, pairs, lighting.camera_response)
         weights = replace(weights, albedo=0.0)  # the albedo is fitted through the shading, not to the colour
     if weights.mask:
         opacity = render.opacity.clamp(1e-4, 1.0 - 1e-4)
@@ -141,7 +141,7 @@ def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alpha
     metallic = (render.metallic[solid] / o).clamp(0.0, 1.0)
     normal, view = render.normal[solid], -directions[solid]
     shaded = shade(lighting, albedo, roughness, metallic, normal, view).radiance
-    terms["pbr"] = (radiance_to_display_torch(shaded) - colours[solid]).abs().mean()
+    terms["pbr"] = (radiance_to_display_torch(shaded, lighting.camera_response) - colours[solid]).abs().mean()
     if shared_materials:
         terms["shared_materials"] = shared_material_loss(albedo, roughness, metallic if share_metallic else None, sigma)
     if shared_albedo:
@@ -161,7 +161,7 @@ PAIR_MIN_RADIANCE = 0.02  # darker pixels' chromaticity is mostly noise: they ar
 
 
 def paired_albedo_smoothness(render: RayBatchRender, colours: torch.Tensor, alphas: torch.Tensor,
-                             pairs: torch.Tensor) -> torch.Tensor:
+                             pairs: torch.Tensor, camera_response: str = "aces") -> torch.Tensor:
     """Nearby rays whose photo colours have the same chromaticity, weighted by how alike it is, should
     have the same albedo: shading scales the linear colour and leaves its chromaticity, a change of
     paint changes both. Without it the albedo may absorb whatever shading the lighting gets wrong
@@ -171,7 +171,7 @@ def paired_albedo_smoothness(render: RayBatchRender, colours: torch.Tensor, alph
     opacity = render.opacity
     solid = (alphas[i] > 0.99) & (alphas[j] > 0.99) & (opacity[i].detach() > 0.5) & (opacity[j].detach() > 0.5)
     with torch.no_grad():
-        linear = display_to_radiance_torch(colours.clamp(0.0, 0.98))
+        linear = display_to_radiance_torch(colours.clamp(0.0, 0.98), camera_response)
         total = linear.sum(-1, keepdim=True)
         chroma = linear / total.clamp(min=1e-6)
         alike = torch.exp(-((chroma[i] - chroma[j]) ** 2).sum(-1) / (2.0 * PAIR_CHROMA_SIGMA**2))
@@ -192,7 +192,7 @@ def delit_albedo(lighting, colours: torch.Tensor, roughness: torch.Tensor, metal
     solving per channel de-lights the photo in closed form. A direct, per-ray target for the albedo
     (the photometric term alone reaches it only through the tone curve, slowly); pixels near
     clipping (a lower bound only) and ones the light barely reaches are left out."""
-    radiance = display_to_radiance_torch(colours)
+    radiance = display_to_radiance_torch(colours, lighting.camera_response)
     shaded = lambda albedo: shade(lighting, albedo, roughness, metallic, normal, view).radiance  # noqa: E731
     dark, lit = shaded(torch.zeros_like(colours)), shaded(torch.ones_like(colours))
     gain = lit - dark

@@ -128,11 +128,18 @@ def test_refine_with_materials_fits_them_under_the_capture_lighting(capture, cap
     assert record["settings"]["light_lobes"] == 0
     observed = np.zeros((64, 128))
     observed[32:] = 5  # the lower half seen, as a capture's backgrounds see it
+    # Read through plain sRGB, as a capture on a clipped white backdrop is (camera_response.py): the
+    # refinement compares through the estimate's curve and records it for the export's texture fit.
     CaptureLighting(make_procedural_environment("studio", width=128), observed, np.zeros((64, 128)), 8,
-                    CaptureLightingConfig()).save(capture)
+                    CaptureLightingConfig(response="srgb")).save(capture)
     assert main(["refine", str(capture), "--materials"] + steps) == 0
     step = capture / "reconstruction" / "update_02"
     record = json.loads((step / "refine.json").read_text())
+    from lirm.engine.capture.capture_folder import Capture
+    from lirm.engine.export.capture_export import texture_fit_inputs
+
+    entry = Capture.open(capture).updates[-1]
+    assert entry["camera_response"] == "srgb" and texture_fit_inputs(Capture.open(capture), entry)[1].camera_response == "srgb"
     assert record["settings"]["light_lobes"] == 1  # one compact light by default
     pbr = [entry["pbr"] for entry in record["losses"] if "pbr" in entry]
     assert len(pbr) >= 2 and pbr[-1] < pbr[0], record["losses"]

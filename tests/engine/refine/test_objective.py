@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 
-from lirm.engine.lighting.camera_response import display_to_radiance_torch, radiance_to_display_torch
+from lirm.engine.lighting.camera_response import RESPONSES, display_to_radiance_torch, radiance_to_display_torch
 from lirm.engine.lighting.panorama_lighting import PanoramaLighting
 from lirm.engine.lighting.split_sum_shading import shade
 from lirm.engine.refine.objective import delit_albedo
@@ -26,12 +27,16 @@ def test_the_camera_curve_inverts_in_torch():
     torch.testing.assert_close(radiance_to_display_torch(display_to_radiance_torch(display)), display, atol=1e-5, rtol=0)
 
 
-def test_a_shaded_photo_de_lights_to_its_albedo_even_with_metal():
+@pytest.mark.parametrize("response", RESPONSES)
+def test_a_shaded_photo_de_lights_to_its_albedo_even_with_metal(response):
+    """Through the tone curve the capture was read with (the lighting carries it): a photo made
+    through plain sRGB and read through ACES would come back far from its albedo."""
     lighting = PanoramaLighting.from_environment(make_procedural_environment("sky", width=128), height=16)
+    lighting.camera_response = response
     normal, view, albedo, roughness = _surface(400)
     for metallic in (torch.zeros(400), torch.full((400,), 0.7)):
         with torch.no_grad():
-            photo = radiance_to_display_torch(shade(lighting, albedo, roughness, metallic, normal, view).radiance)
+            photo = radiance_to_display_torch(shade(lighting, albedo, roughness, metallic, normal, view).radiance, response)
         target, usable = delit_albedo(lighting, photo, roughness, metallic, normal, view)
         assert usable.float().mean() > 0.8  # all but clipped or unlit pixels
         error = (target[usable] - albedo[usable]).abs()
