@@ -55,6 +55,7 @@ class ScriptRunner:
         viewport = self.app.viewport
         self.result["viewport"] = {"channel": self.app.state.choices.view.channel, "environment_listed": self.app.state.choices.view.environment,
                                    "environment_lit": None if viewport is None else viewport.environment_key,
+                                   "tonemapper": None if viewport is None else viewport.tonemapper,
                                    "scale_bar": next((p.scale_label for p in self.app.panels if hasattr(p, "scale_label")), "")}
         (self.out / "script_result.json").write_text(json.dumps(self.result, indent=1))
 

@@ -73,6 +73,7 @@ class Viewport:
         self.asset_stamp: int | None = None  # the shown file's mtime: a file rewritten in place is shown again
         self._maps = None
         self.environment_key = None
+        self.tonemapper = "aces"  # RenderSettings.tonemapper: see set_environment
         self.texture: moderngl.Texture | None = None
         self._fbo: moderngl.Framebuffer | None = None
         self._depth = None
@@ -99,9 +100,12 @@ class Viewport:
                 self.orbit.frame(self.bounds)
         self.dirty = True
 
-    def set_environment(self, environment: Environment, key) -> None:
+    def set_environment(self, environment: Environment, key, tonemapper: str = "aces") -> None:
+        """`tonemapper`: "linear" for a capture's own lighting read through plain sRGB, so that the
+        asset under it looks as the photos do (camera_response.response_for_capture)."""
         if key == self.environment_key:
             return
+        self.tonemapper = tonemapper
         if self._maps is not None:
             self._maps.release()
         self._maps = self.renderer.baker.bake(environment)
@@ -133,7 +137,7 @@ class Viewport:
             camera = self.orbit.camera(width, height)
             lighting = Lighting(self._maps, rotation_deg, 0.0)
             settings = RenderSettings(exposure_ev=exposure_ev, show_environment=background, supersample=1,
-                                      clear_color=(0.18, 0.18, 0.18))
+                                      clear_color=(0.18, 0.18, 0.18), tonemapper=self.tonemapper)
             if self.scene is None:
                 self.renderer.draw_to_framebuffer(self._fbo, self._empty_scene(), camera, lighting, settings)
             elif channel in DISPLAY_CHANNELS:

@@ -317,7 +317,10 @@ class LirmApp:
             environment = resolve_environment("studio", width=self.config.environment_width)
         if view.environment not in BUILTIN_ENVIRONMENTS and view.environment not in self.user_environments:
             self.user_environments.append(view.environment)  # an HDRI chosen in an earlier session: listed again
-        self.viewport.set_environment(environment, view.environment)
+        from lirm.engine.lighting.camera_response import TONE_CURVE_OF_RESPONSE
+        from lirm.engine.lighting.capture_lighting import camera_response_of
+
+        self.viewport.set_environment(environment, view.environment, TONE_CURVE_OF_RESPONSE[camera_response_of(view.environment)])
 
     def add_environment(self, path: str) -> None:
         p = Path(path).expanduser().resolve()

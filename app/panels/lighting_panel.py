@@ -88,3 +88,6 @@ class LightingPanel:
         imgui.text_wrapped(f"estimated from the backgrounds of {info.get('photos_used', '?')} photos; "
                            + (f"{100 * seen:.0f}% of directions seen, " if seen is not None else "")
                            + "the hatched rest is filled smoothly, not measured")
+        if (info.get("config") or {}).get("response") == "srgb":
+            imgui.text_wrapped("The photos were read through a plain sRGB curve (a plain backdrop photographed "
+                               "clipped), and under this light the viewport shows them so.")

@@ -16,6 +16,8 @@ import numpy as np
 from lirm.renderer.tonemap import ACES_INPUT, ACES_OUTPUT
 
 RESPONSES = ("aces", "srgb")
+# The renderer's tone mapper (RenderSettings.tonemapper) that is each response's forward curve.
+TONE_CURVE_OF_RESPONSE = {"aces": "aces", "srgb": "linear"}
 # The ACES fit's rational curve reaches 1 / 0.983729 only at infinite radiance; display values are
 # capped just below 1 (a clipped pixel), which inverts to a finite radiance: the lower bound of
 # what the pixel saw.

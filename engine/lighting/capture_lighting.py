@@ -286,3 +286,15 @@ def missing_lighting_reason(capture_root: str | Path) -> str:
 def load_capture_lighting_info(capture_root: str | Path) -> dict | None:
     path = Path(capture_root) / LIGHTING_FOLDER / INFO_FILE
     return json.loads(path.read_text()) if path.is_file() else None
+
+
+def camera_response_of(panorama: str | Path) -> str:
+    """The tone curve a capture's lighting estimate was read through, when `panorama` is one
+    (`LIGHTING_FOLDER/PANORAMA_FILE` with its `INFO_FILE` beside it); "aces" for any other file."""
+    path = Path(panorama)
+    if path.name != PANORAMA_FILE:
+        return "aces"
+    try:
+        return str(json.loads((path.parent / INFO_FILE).read_text())["config"]["response"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return "aces"

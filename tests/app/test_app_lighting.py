@@ -51,6 +51,7 @@ def test_the_capture_lighting_is_offered_and_lights_the_viewport(lego_capture, t
     result = json.loads((tmp_path / "out" / "script_result.json").read_text())
     assert result["errors"] == [], result["errors"]
     assert result["viewport"]["environment_lit"] == panorama
+    assert result["viewport"]["tonemapper"] == "aces"  # the estimate was read through the ACES curve
     # Viewport guides (issue 21, case 7): with the real height stated, the scale bar is in real units.
     value, unit = result["viewport"]["scale_bar"].split()
     metres = float(value) * {"m": 1.0, "cm": 0.01, "mm": 0.001}[unit]
@@ -65,3 +66,34 @@ def test_the_capture_lighting_is_offered_and_lights_the_viewport(lego_capture, t
     before, after = (cv2.imread(result["screenshots"][name])[:, x1 + 4:].astype(int) for name in ("studio", "as_photographed"))
     changed = np.abs(before - after).max(axis=-1) > 30
     assert changed.sum() > 20_000, changed.sum()  # a panorama of about 230 x 115 pixels appeared
+
+
+def test_a_capture_read_through_srgb_is_shown_through_srgb_under_its_own_light(lego_capture, tmp_path, x_display):
+    """A capture on a clipped white backdrop is read through plain sRGB (camera_response.py): under
+    its own light the viewport shows the asset through that curve, as the photos look (under any
+    other environment through the product's ACES curve: the test above)."""
+    capture = tmp_path / "capture"
+    shutil.copytree(lego_capture, capture)
+    observed = np.zeros((64, 128))
+    observed[32:] = 5
+    CaptureLighting(make_procedural_environment("studio", width=128), observed, np.ones((64, 128)), 8,
+                    CaptureLightingConfig(response="srgb")).save(capture)
+    panorama = str((capture / "lighting" / "as_photographed.hdr").resolve())
+    out = tmp_path / "out"
+    script = {"out": str(out), "steps": [
+        {"frames": 2}, {"action": "open_capture", "args": [str(capture)]},
+        {"action": "set_environment", "args": ["studio"]}, {"frames": 3}, {"screenshot": "studio"},
+        {"action": "set_environment", "args": [panorama]}, {"frames": 3}, {"screenshot": "own_light"},
+        {"report_widgets": True}, {"quit": True}]}
+    (tmp_path / "script.json").write_text(json.dumps(script))
+    env = dict(os.environ, DISPLAY=x_display, XDG_CONFIG_HOME=str(tmp_path / "config"))
+    proc = subprocess.run([sys.executable, "-m", "lirm.engine.cli", "app", "--new", "--script", str(tmp_path / "script.json")],
+                          env=env, cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    result = json.loads((out / "script_result.json").read_text())
+    assert result["errors"] == [], result["errors"]
+    assert result["viewport"]["environment_lit"] == panorama and result["viewport"]["tonemapper"] == "linear"
+    # The same studio light behind, through the other curve: the backdrop is shown differently.
+    x0, y0, x1, y1 = (int(round(v)) for v in result["widgets"]["viewport"])
+    studio, own = (cv2.imread(result["screenshots"][name])[y0 + 2:y1 - 2, x0 + 2:x1 - 2].astype(int) for name in ("studio", "own_light"))
+    assert np.abs(studio - own).mean() > 5
