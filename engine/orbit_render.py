@@ -49,6 +49,7 @@ class OrbitRenderConfig:
     environment_rotation_deg: float = 0.0
     normalize: bool = True  # scale and centre the asset into the unit sphere at the origin
     margin: float = 1.05  # camera distance covers the bounding sphere times this
+    tonemapper: str = "aces"  # RenderSettings.tonemapper ("linear": a capture's lighting read through plain sRGB)
 
     def __post_init__(self) -> None:
         if self.views < 1:
@@ -106,7 +107,8 @@ def render_orbit(
     transform = normalizing_transform(model.bounds) if config.normalize and cameras is None else np.eye(4)
     scene = renderer.upload(model.meshes, transform)
     lighting = renderer.prepare_lighting(environment, rotation_deg=config.environment_rotation_deg)
-    settings = RenderSettings(exposure_ev=config.exposure_ev, show_environment=config.background, supersample=config.supersample)
+    settings = RenderSettings(exposure_ev=config.exposure_ev, show_environment=config.background, supersample=config.supersample,
+                              tonemapper=config.tonemapper)
     if cameras is None:
         radius = 1.0 if config.normalize else float(np.linalg.norm(scene.bounds[1] - scene.bounds[0])) / 2.0
         cameras = orbit_for(config, radius)

@@ -62,13 +62,17 @@ def run(args: argparse.Namespace) -> int:
     check_output(args.out, "the output folder (-o)", folder=True)
     model = resolve_asset(args.asset)
     environment = resolve_environment(args.env)
+    from dataclasses import replace
+
+    from ..lighting.camera_response import TONE_CURVE_OF_RESPONSE
+    from ..lighting.capture_lighting import LIGHTING_FOLDER, PANORAMA_FILE, camera_response_of
+
+    own_light = Path(args.env) / LIGHTING_FOLDER / PANORAMA_FILE if Path(args.env).is_dir() else Path(args.env)
+    response = camera_response_of(own_light)  # a capture read through plain sRGB is shown through it under its own light
+    config = replace(config, tonemapper=TONE_CURVE_OF_RESPONSE[response])
     cameras = None
     if args.cameras is not None:
-        from ..orbit_render import cameras_from_transforms
-
-        from dataclasses import replace
-
-        from ..orbit_render import MAX_RENDER_SIDE
+        from ..orbit_render import MAX_RENDER_SIDE, cameras_from_transforms
 
         if args.cameras.is_dir():
             from ..orbit_render import cameras_of_capture
@@ -92,6 +96,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         renderer.release()
         ctx.release()
-    print(f"wrote {len(result.cameras)} views of {model.source.name} under {environment.name} to {result.out_dir}/")
+    curve = " (shown through plain sRGB, as its photos were read)" if response == "srgb" else ""
+    print(f"wrote {len(result.cameras)} views of {model.source.name} under {environment.name}{curve} to {result.out_dir}/")
     print("  beauty/ radiance/ albedo/ roughness/ metallic/ normal/ depth/ mask/ transforms.json")
     return 0

@@ -6,10 +6,7 @@ pose column to its length and cut every photo's name to two letters."""
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import subprocess
-import sys
 
 import pytest
 
@@ -34,7 +31,7 @@ def test_a_status_is_cut_to_its_head():
 
 @pytest.mark.display
 @pytest.mark.slow
-def test_unposed_views_leave_the_names_their_room(lego_capture, tmp_path, x_display):
+def test_unposed_views_leave_the_names_their_room(lego_capture, tmp_path, scripted_session):
     capture = tmp_path / "capture"
     shutil.copytree(lego_capture, capture)
     data = json.loads((capture / "capture.json").read_text())
@@ -44,16 +41,9 @@ def test_unposed_views_leave_the_names_their_room(lego_capture, tmp_path, x_disp
     (capture / "prepared" / f"{left_out}.npz").unlink()
     data["frames"][-2]["mask_status"] = "touches the border on all four sides: it probably includes background"
     (capture / "capture.json").write_text(json.dumps(data))
-    script = {"out": str(tmp_path / "out"), "steps": [
+    result = scripted_session([
         {"frames": 2}, {"action": "open_capture", "args": [str(capture)]}, {"frames": 3},
-        {"report_widgets": True}, {"screenshot": "views"}, {"quit": True}]}
-    (tmp_path / "script.json").write_text(json.dumps(script))
-    env = dict(os.environ, DISPLAY=x_display, XDG_CONFIG_HOME=str(tmp_path / "config"))
-    proc = subprocess.run([sys.executable, "-m", "lirm.engine.cli", "app", "--new", "--script", str(tmp_path / "script.json")],
-                          env=env, cwd=tmp_path, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    result = json.loads((tmp_path / "out" / "script_result.json").read_text())
-    assert result["errors"] == [], result["errors"]
+        {"report_widgets": True}, {"screenshot": "views"}, {"quit": True}])
     names = {k: v for k, v in result["widgets"].items() if k.startswith("view_")}
     assert len(names) == len(data["frames"]), sorted(names)
     widths = [x1 - x0 for x0, _, x1, _ in names.values()]

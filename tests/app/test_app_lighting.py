@@ -4,11 +4,7 @@ The screenshots are left in the test's folder (out/) to look at."""
 
 from __future__ import annotations
 
-import json
-import os
 import shutil
-import subprocess
-import sys
 
 import cv2
 import numpy as np
@@ -29,12 +25,12 @@ def _estimate_into(capture) -> str:
     return str((capture / "lighting" / "as_photographed.hdr").resolve())
 
 
-def test_the_capture_lighting_is_offered_and_lights_the_viewport(lego_capture, tmp_path, x_display):
+def test_the_capture_lighting_is_offered_and_lights_the_viewport(lego_capture, tmp_path, scripted_session):
     capture = tmp_path / "capture"
     shutil.copytree(lego_capture, capture)
     panorama = _estimate_into(capture)
     views = sorted(p.stem for p in (capture / "prepared").glob("*.npz"))
-    script = {"out": str(tmp_path / "out"), "steps": [
+    result = scripted_session([
         {"frames": 2}, {"action": "open_capture", "args": [str(capture)]},
         {"action": "select_views", "args": [views[:4]]}, {"action": "run_update"}, {"wait": "jobs"},
         {"action": "set_environment", "args": ["studio"]}, {"frames": 3}, {"screenshot": "studio"},
@@ -42,14 +38,7 @@ def test_the_capture_lighting_is_offered_and_lights_the_viewport(lego_capture, t
         {"report_widgets": True},
         {"action": "set_real_size", "args": [0.2]}, {"wait": "jobs"}, {"frames": 3}, {"wait": "jobs"}, {"frames": 3},
         {"screenshot": "real_size"},
-        {"quit": True}]}
-    (tmp_path / "script.json").write_text(json.dumps(script))
-    env = dict(os.environ, DISPLAY=x_display, XDG_CONFIG_HOME=str(tmp_path / "config"))
-    proc = subprocess.run([sys.executable, "-m", "lirm.engine.cli", "app", "--new", "--script", str(tmp_path / "script.json")],
-                          env=env, cwd=tmp_path, capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    result = json.loads((tmp_path / "out" / "script_result.json").read_text())
-    assert result["errors"] == [], result["errors"]
+        {"quit": True}])
     assert result["viewport"]["environment_lit"] == panorama
     assert result["viewport"]["tonemapper"] == "aces"  # the estimate was read through the ACES curve
     # Viewport guides (issue 21, case 7): with the real height stated, the scale bar is in real units.
@@ -68,7 +57,7 @@ def test_the_capture_lighting_is_offered_and_lights_the_viewport(lego_capture, t
     assert changed.sum() > 20_000, changed.sum()  # a panorama of about 230 x 115 pixels appeared
 
 
-def test_a_capture_read_through_srgb_is_shown_through_srgb_under_its_own_light(lego_capture, tmp_path, x_display):
+def test_a_capture_read_through_srgb_is_shown_through_srgb_under_its_own_light(lego_capture, tmp_path, scripted_session):
     """A capture on a clipped white backdrop is read through plain sRGB (camera_response.py): under
     its own light the viewport shows the asset through that curve, as the photos look (under any
     other environment through the product's ACES curve: the test above)."""
@@ -79,19 +68,11 @@ def test_a_capture_read_through_srgb_is_shown_through_srgb_under_its_own_light(l
     CaptureLighting(make_procedural_environment("studio", width=128), observed, np.ones((64, 128)), 8,
                     CaptureLightingConfig(response="srgb")).save(capture)
     panorama = str((capture / "lighting" / "as_photographed.hdr").resolve())
-    out = tmp_path / "out"
-    script = {"out": str(out), "steps": [
+    result = scripted_session([
         {"frames": 2}, {"action": "open_capture", "args": [str(capture)]},
         {"action": "set_environment", "args": ["studio"]}, {"frames": 3}, {"screenshot": "studio"},
         {"action": "set_environment", "args": [panorama]}, {"frames": 3}, {"screenshot": "own_light"},
-        {"report_widgets": True}, {"quit": True}]}
-    (tmp_path / "script.json").write_text(json.dumps(script))
-    env = dict(os.environ, DISPLAY=x_display, XDG_CONFIG_HOME=str(tmp_path / "config"))
-    proc = subprocess.run([sys.executable, "-m", "lirm.engine.cli", "app", "--new", "--script", str(tmp_path / "script.json")],
-                          env=env, cwd=tmp_path, capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    result = json.loads((out / "script_result.json").read_text())
-    assert result["errors"] == [], result["errors"]
+        {"report_widgets": True}, {"quit": True}])
     assert result["viewport"]["environment_lit"] == panorama and result["viewport"]["tonemapper"] == "linear"
     # The same studio light behind, through the other curve: the backdrop is shown differently.
     x0, y0, x1, y1 = (int(round(v)) for v in result["widgets"]["viewport"])

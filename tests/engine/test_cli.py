@@ -63,6 +63,31 @@ def test_render_builtin_object_writes_every_channel_and_consistent_cameras(tmp_p
         assert 0 < z < np.linalg.norm(camera.center)  # the surface is in front of the object's centre
 
 
+def test_render_under_a_capture_read_through_srgb_shows_it_through_srgb(tmp_path, capsys):
+    """`lirm render --env CAPTURE` of a capture on a clipped white backdrop (read through plain sRGB,
+    camera_response.py) renders through that curve; the same panorama as a plain .hdr through ACES."""
+    import shutil
+
+    from lirm.engine.lighting.capture_lighting import CaptureLighting, CaptureLightingConfig
+    from lirm.renderer.procedural_environments import make_procedural_environment
+
+    capture = tmp_path / "capture"
+    (capture / "lighting").mkdir(parents=True)
+    (capture / "capture.json").write_text("{}")
+    observed = np.ones((32, 64))
+    CaptureLighting(make_procedural_environment("studio", width=64), observed, np.ones((32, 64)), 4,
+                    CaptureLightingConfig(response="srgb")).save(capture)
+    shutil.copy(capture / "lighting" / "as_photographed.hdr", tmp_path / "studio_copy.hdr")
+    beauty = {}
+    for name, env in (("own", capture), ("plain", tmp_path / "studio_copy.hdr")):
+        code, out, err = run_cli(capsys, "render", "vase", "--env", str(env), "--views", "1", "--size", "48x48",
+                                 "--supersample", "1", "-o", str(tmp_path / name))
+        assert code == 0, err
+        assert ("shown through plain sRGB" in out) == (name == "own"), out
+        beauty[name] = cv2.imread(str(tmp_path / name / "beauty" / "000.png")).astype(int)
+    assert np.abs(beauty["own"] - beauty["plain"]).mean() > 5
+
+
 def test_render_without_background_writes_rgba_with_coverage(tmp_path, capsys):
     code, _, err = run_cli(capsys, "render", "vase", "--views", "1", "--size", "48x48", "--no-background", "-o", str(tmp_path))
     assert code == 0, err

@@ -147,15 +147,6 @@ def test_automatic_masks_on_a_plain_backdrop(shared_data, kind):
     print(report)
     assert np.mean(list(ious.values())) >= 0.93, report
     assert min(ious.values()) >= 0.85, report
-    # The backdrop is pure white, clipped wherever the photos see it: its lighting and the materials
-    # are read through a plain sRGB decode, not the ACES curve that made the backdrop a light of 26
-    # (camera_response.response_for_capture), and the estimate says so.
-    lighting = [e for e in capture.history if e["action"] == "lighting"][-1]
-    assert lighting["clipped"] >= 0.5 and lighting["camera_response"] == "srgb", lighting
-    info = json.loads((capture.root / "lighting" / "lighting.json").read_text())
-    assert info["config"]["response"] == "srgb"
-    estimate = cv2.imread(str(capture.root / "lighting" / "as_photographed.hdr"), cv2.IMREAD_UNCHANGED)
-    assert 0.9 <= float(np.median(estimate)) <= 1.0  # the clipped white's radiance through sRGB (26 through ACES)
 
 
 @pytest.mark.slow
