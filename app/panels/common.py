@@ -31,3 +31,9 @@ def short_status(status: str, longest: int = 16) -> str:
     whole reason is the cell's tooltip."""
     head = status.split(":", 1)[0].split(" (", 1)[0].strip()
     return head if 0 < len(head) <= longest else ""
+
+
+def format_seconds(seconds: float) -> str:
+    """A short duration as a person reads it: "0.41 s", and "6 ms" rather than "0.00 s" (the tiny
+    network's update takes a few milliseconds once torch is warm)."""
+    return f"{1000 * seconds:.0f} ms" if seconds < 0.1 else f"{seconds:.2f} s"

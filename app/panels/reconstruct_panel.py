@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from imgui_bundle import imgui
 
-from .common import coloured, job_progress
+from .common import coloured, format_seconds, job_progress
 
 
 class ReconstructPanel:
@@ -72,8 +72,9 @@ class ReconstructPanel:
                 full = (f"Step {u['update']}: refined from {u.get('started_from', '?')} on {len(u['frames'])} views, "
                         f"{u.get('steps', 0)} steps in {u.get('seconds', 0):.0f} s{extra}")
             else:
-                label = f"{u['update']}: {len(u['frames'])} views, network {u.get('seconds', 0):.2f} s"
-                full = f"Update {u['update']}: {len(u['frames'])} views, network {u.get('seconds', 0):.2f} s{extra}"
+                network = format_seconds(u.get("seconds", 0))
+                label = f"{u['update']}: {len(u['frames'])} views, network {network}"
+                full = f"Update {u['update']}: {len(u['frames'])} views, network {network}{extra}"
             full += "\nviews: " + ", ".join(self._view_names(u["frames"]))
             full += "\n(click to look at it; the next update goes on from here)"
             # The row keeps to one short line; everything about the step is in its tooltip.

@@ -10,23 +10,11 @@ import shutil
 
 import pytest
 
-from lirm.app.panels.common import short_status
-from lirm.engine.capture.colmap_posing import STATUS_NOT_REGISTERED, STATUS_SEPARATE_MODEL
 from lirm.engine.capture.pipeline import LEFT_OUT
 
 LONG_REASON = (f"{LEFT_OUT} its pose disagreed with the other photos' outlines (31% of the object's outline fell where "
                "they see none): structure from motion likely put it on the wrong side of an object that looks alike "
                "from two sides")
-
-
-def test_a_status_is_cut_to_its_head():
-    assert short_status(LONG_REASON) == "left out"
-    assert short_status(STATUS_NOT_REGISTERED) == "not registered"
-    assert short_status("missing: the mask file was deleted") == "missing"
-    assert short_status("ok") == "ok" and short_status("empty: no object found in this view") == "empty"
-    # A head that is itself long says nothing rather than half a sentence ("registered in a ..."),
-    # and the panel then shows its own word for a failure.
-    assert short_status(STATUS_SEPARATE_MODEL) == "" and short_status("") == ""
 
 
 @pytest.mark.display
