@@ -589,23 +589,29 @@ def _lighting(capture: Capture, config: CaptureConfig, cancel) -> None:
         if mask is not None:
             images[f], masks[f] = capture.read_image(f), mask
     plane = capture.normalization.plane if capture.normalization is not None else None
-    plain_backdrop = bool(capture.settings.get("plain_backdrop"))
-    try:
-        # Clipping is judged on the display values, whatever the curve: estimate once, then again
-        # through the curve the clipped share chooses (about 2 s).
-        first = config.camera_response if config.camera_response in RESPONSES else "aces"
-        lighting = estimate_capture_lighting(images, masks, capture.cameras, replace(config.lighting, response=first),
+
+    def estimate(response: str):
+        try:
+            return estimate_capture_lighting(images, masks, capture.cameras, replace(config.lighting, response=response),
                                              cancel=cancel, support_plane=plane)
-        response, why = response_for_capture(config.camera_response, plain_backdrop, lighting.clipped_fraction)
-        if response != first:
-            lighting = estimate_capture_lighting(images, masks, capture.cameras, replace(config.lighting, response=response),
-                                                 cancel=cancel, support_plane=plane)
-    except InterruptedError as error:
-        raise Cancelled(str(error)) from error
-    except ValueError as error:
-        capture.log("lighting", estimated=False, reason=str(error))
-        capture.save()
+        except InterruptedError as error:
+            raise Cancelled(str(error)) from error
+        except ValueError as error:
+            capture.log("lighting", estimated=False, reason=str(error))
+            capture.save()
+            return None
+
+    # Clipping is judged on the display values, whatever the curve: estimate once, then again through
+    # the curve the clipped share chooses (about 2 s).
+    lighting = estimate(config.camera_response if config.camera_response in RESPONSES else "aces")
+    if lighting is None:
         return
+    response, why = response_for_capture(config.camera_response, bool(capture.settings.get("plain_backdrop")),
+                                         lighting.clipped_fraction)
+    if response != lighting.config.response:
+        lighting = estimate(response)
+        if lighting is None:
+            return
     path = lighting.save(capture.root)
     capture.log("lighting", estimated=True, file=str(path.relative_to(capture.root)), photos=lighting.photos_used,
                 seen=round(lighting.seen_fraction, 3), clipped=round(lighting.clipped_fraction, 3),

@@ -65,10 +65,9 @@ def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from ..lighting.camera_response import TONE_CURVE_OF_RESPONSE
-    from ..lighting.capture_lighting import LIGHTING_FOLDER, PANORAMA_FILE, camera_response_of
+    from ..lighting.capture_lighting import camera_response_of
 
-    own_light = Path(args.env) / LIGHTING_FOLDER / PANORAMA_FILE if Path(args.env).is_dir() else Path(args.env)
-    response = camera_response_of(own_light)  # a capture read through plain sRGB is shown through it under its own light
+    response = camera_response_of(args.env)  # a capture read through plain sRGB is shown through it under its own light
     config = replace(config, tonemapper=TONE_CURVE_OF_RESPONSE[response])
     cameras = None
     if args.cameras is not None:

@@ -64,8 +64,9 @@ def texture_fit_inputs(capture: Capture, entry: dict):
     if not views:
         return None
     environment = load_environment_file(lighting_file)
-    lighting = PanoramaLighting.from_environment(environment, environment.radiance.shape[0])
-    lighting.camera_response = entry.get("camera_response", "aces")  # refinements before it was recorded: ACES
+    # (refinements from before the curve was recorded were all fitted through ACES)
+    lighting = PanoramaLighting.from_environment(environment, environment.radiance.shape[0],
+                                                 camera_response=entry.get("camera_response", "aces"))
     photos = PhotoViews([v.camera for v in views], np.stack([v.image_masked for v in views]), np.stack([v.mask for v in views]))
     return photos, lighting
 

@@ -32,7 +32,7 @@ from lirm.renderer.tonemap import tonemap
 
 from ..io.atomic_files import atomic_write, atomic_write_json
 from ..io.images import write_png
-from .camera_response import display_to_radiance
+from .camera_response import RESPONSES, display_to_radiance
 
 LIGHTING_FOLDER = "lighting"
 PANORAMA_FILE = "as_photographed.hdr"
@@ -288,13 +288,17 @@ def load_capture_lighting_info(capture_root: str | Path) -> dict | None:
     return json.loads(path.read_text()) if path.is_file() else None
 
 
-def camera_response_of(panorama: str | Path) -> str:
-    """The tone curve a capture's lighting estimate was read through, when `panorama` is one
-    (`LIGHTING_FOLDER/PANORAMA_FILE` with its `INFO_FILE` beside it); "aces" for any other file."""
-    path = Path(panorama)
+def camera_response_of(environment: str | Path) -> str:
+    """The tone curve (camera_response.RESPONSES) a capture's lighting estimate was read through, when
+    `environment` is a capture folder or its `LIGHTING_FOLDER/PANORAMA_FILE`; "aces" for anything else
+    (a built-in environment, an HDRI)."""
+    path = Path(environment)
+    if path.is_dir():
+        path = path / LIGHTING_FOLDER / PANORAMA_FILE
     if path.name != PANORAMA_FILE:
         return "aces"
     try:
-        return str(json.loads((path.parent / INFO_FILE).read_text())["config"]["response"])
+        response = str(json.loads((path.parent / INFO_FILE).read_text())["config"]["response"])
     except (OSError, ValueError, KeyError, TypeError):
         return "aces"
+    return response if response in RESPONSES else "aces"

@@ -42,14 +42,14 @@ def brdf_table(size: int = 32, samples: int = 4096) -> torch.Tensor:
 
 class PanoramaLighting(torch.nn.Module):
     def __init__(self, log_radiance: torch.Tensor, sharpest_lobe_texels: float = 1.0, light_lobes: int = 0,
-                 smoothness_scale: float = 0.0):
+                 smoothness_scale: float = 0.0, camera_response: str = "aces"):
         super().__init__()
         # 0: the smoothness term is the plain total variation of the log radiance; above 0, a step of
         # log contrast d costs scale * log(1 + d / scale) (`smoothness_loss`).
         self.smoothness_scale = float(smoothness_scale)
         # The camera's tone curve that the photos shaded under this light are compared through
         # (camera_response.RESPONSES): the one the capture's estimate was read with.
-        self.camera_response = "aces"
+        self.camera_response = camera_response
         height, width = log_radiance.shape[:2]
         self.log_radiance = torch.nn.Parameter(log_radiance.clone().float())
         # The texel grid of an environment of this size (its one definition: renderer/environment.py).
@@ -81,10 +81,12 @@ class PanoramaLighting(torch.nn.Module):
 
     @classmethod
     def from_environment(cls, environment: Environment, height: int = 16, sharpest_lobe_texels: float = 1.0,
-                         light_lobes: int = 0, smoothness_scale: float = 0.0) -> "PanoramaLighting":
+                         light_lobes: int = 0, smoothness_scale: float = 0.0,
+                         camera_response: str = "aces") -> "PanoramaLighting":
         """Area-average `environment` down to height x 2 height texels."""
         mean = _area_mean(environment.radiance, environment, height)
-        return cls(torch.from_numpy(np.log(np.maximum(mean, 1e-4))), sharpest_lobe_texels, light_lobes, smoothness_scale)
+        return cls(torch.from_numpy(np.log(np.maximum(mean, 1e-4))), sharpest_lobe_texels, light_lobes, smoothness_scale,
+                   camera_response)
 
     @classmethod
     def from_capture_lighting(cls, lighting, height: int = 16, sharpest_lobe_texels: float = 1.0,
@@ -92,8 +94,8 @@ class PanoramaLighting(torch.nn.Module):
         """From a capture's estimate (capture_lighting.CaptureLighting): starts as its filled panorama
         and keeps what the photos saw as an observation (`observation_loss`); clipped texels are
         lower bounds only."""
-        panorama = cls.from_environment(lighting.environment, height, sharpest_lobe_texels, light_lobes, smoothness_scale)
-        panorama.camera_response = lighting.config.response
+        panorama = cls.from_environment(lighting.environment, height, sharpest_lobe_texels, light_lobes, smoothness_scale,
+                                        lighting.config.response)
         env = lighting.environment
         seen = (lighting.observed > 0).astype(np.float64)
         clipped = seen * lighting.clipped

@@ -31,8 +31,8 @@ def test_the_camera_curve_inverts_in_torch():
 def test_a_shaded_photo_de_lights_to_its_albedo_even_with_metal(response):
     """Through the tone curve the capture was read with (the lighting carries it): a photo made
     through plain sRGB and read through ACES would come back far from its albedo."""
-    lighting = PanoramaLighting.from_environment(make_procedural_environment("sky", width=128), height=16)
-    lighting.camera_response = response
+    lighting = PanoramaLighting.from_environment(make_procedural_environment("sky", width=128), height=16,
+                                                 camera_response=response)
     normal, view, albedo, roughness = _surface(400)
     for metallic in (torch.zeros(400), torch.full((400,), 0.7)):
         with torch.no_grad():
