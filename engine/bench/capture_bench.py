@@ -17,7 +17,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
+from ..capture.photo_formats import is_photo
 
 
 @dataclass
@@ -47,7 +47,7 @@ class CaptureBenchResult:
 
 def run_capture_bench(config: CaptureBenchConfig, progress=None) -> CaptureBenchResult:
     say = progress or (lambda message: None)
-    photos = sorted(p for p in Path(config.photos).iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+    photos = sorted(p for p in Path(config.photos).iterdir() if is_photo(p))
     result = CaptureBenchResult(str(config.photos))
     for n in config.counts:
         if n > len(photos):
@@ -70,7 +70,7 @@ def _child(photos_dir: str, n: int, max_side: int, masks: str, out: str) -> None
 
     from lirm.engine.capture.pipeline import CaptureConfig, run_capture
 
-    photos = sorted(p for p in Path(photos_dir).iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)[:n]
+    photos = sorted(p for p in Path(photos_dir).iterdir() if is_photo(p))[:n]
     with tempfile.TemporaryDirectory() as tmp:
         inputs = Path(tmp) / "photos"
         inputs.mkdir()

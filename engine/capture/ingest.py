@@ -38,9 +38,9 @@ from lirm.engine.errors import LirmUserError
 from lirm.engine.io.atomic_files import atomic_write_bytes
 from lirm.engine.io.images import write_png
 
+from .photo_formats import FORMATS_IN_WORDS, HEIF_SUFFIXES, enable_heif, is_photo, photo_stems, raw_reason, unread_type_reason
 from .records import FileReport, ImageRecord
 
-IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
 # Files that travel with photos (exports, sidecars, OS litter): skipped without sounding an alarm.
 SIDE_FILE_SUFFIXES = {".json", ".txt", ".md", ".csv", ".xmp", ".xml", ".ini", ".db", ".log", ".yaml", ".yml",
                       ".npy", ".npz", ".ply", ".bin", ".pdf", ".html", ".aae", ".thm"}
@@ -195,6 +195,7 @@ def _jpeg_has_end(data: bytes) -> bool:
 def decode_image(data: bytes, max_side: int) -> tuple[np.ndarray, tuple[int, int]]:
     """Bytes -> (upright 8-bit RGB or RGBA array capped at max_side, upright full size (w, h)).
     RGBA only when some pixel is actually transparent. Raises Unreadable with the reason."""
+    enable_heif()  # by content, not by name: a HEIC saved as .jpg opens too
     try:
         image = Image.open(io.BytesIO(data))
         is_jpeg = image.format in ("JPEG", "MPO")  # MPO: a camera's JPEG with extra pictures appended
@@ -212,7 +213,7 @@ def decode_image(data: bytes, max_side: int) -> tuple[np.ndarray, tuple[int, int
     except Image.DecompressionBombError as err:
         raise Unreadable(f"too large to open safely ({err})") from err
     except UnidentifiedImageError as err:
-        raise Unreadable("not an image (the contents are not a JPEG or PNG)") from err
+        raise Unreadable(f"not an image (the contents are not {FORMATS_IN_WORDS})") from err
     except Exception as err:  # Pillow reports damaged files through many exception types
         raise Unreadable(f"corrupt or incomplete image ({err})") from err
     try:
@@ -279,6 +280,7 @@ def ingest_photos(
     by_hash = {r.sha256: describe(r) for r in existing}
     thumbs = ThumbnailIndex.of_capture(existing, capture_root, config.near_duplicate_tolerance)
     used_original_names = {r.original.name for r in existing if not r.original.is_absolute()}
+    raw_twins = photo_stems(files)
 
     total = len(files)
     if progress is not None:
@@ -289,7 +291,8 @@ def ingest_photos(
         report = FileReport(path=path, accepted=False)
         reports.append(report)
         try:
-            report.reason = _check_and_add(path, capture_root, config, ids, by_hash, thumbs, used_original_names, records, report)
+            report.reason = (raw_reason(path, raw_twins)
+                             or _check_and_add(path, capture_root, config, ids, by_hash, thumbs, used_original_names, records, report))
         except Unreadable as err:
             report.reason = str(err)
         if progress is not None:
@@ -302,8 +305,10 @@ def _check_and_add(path, capture_root, config, ids, by_hash, thumbs, used_origin
     suffix = path.suffix.lower()
     if path.name.startswith(".") or suffix in SIDE_FILE_SUFFIXES:
         return SIDE_FILE_REASON  # dot files include macOS "._IMG.jpg" resource forks, which are not photos
-    if suffix not in IMAGE_SUFFIXES:
-        return "not an image type we read (JPEG or PNG)"
+    if not is_photo(path):
+        return unread_type_reason(path)
+    if suffix in HEIF_SUFFIXES and not enable_heif():
+        return "HEIC / HEIF needs the pillow-heif package (`pip install pillow-heif`), or export the photos as JPEG"
     try:
         with open(path, "rb") as f:
             data = f.read()

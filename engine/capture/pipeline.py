@@ -36,6 +36,7 @@ from .normalize import NormalizeConfig, estimate_normalization, is_floor
 from .pose_import import import_colmap_model, import_transforms_json
 from .records import PosingResult
 from .undistort import undistort_image
+from .photo_formats import FORMATS_IN_WORDS
 from .video_frames import VideoConfig, select_video_frames
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".webm", ".m4v")
@@ -126,8 +127,8 @@ def _check_input_exists(inputs, out: Path) -> None:
 def _no_photos_message(inputs, reports) -> str:
     files = [r for r in reports if r.path.is_file()]
     if not files:
-        return (f"{inputs}: no photos found (the folder holds no files); put the JPEG or PNG photos directly "
-                f"in it, or name a video or camera:N")
+        return (f"{inputs}: no photos found (the folder holds no files); put the photos ({FORMATS_IN_WORDS}) "
+                f"directly in it, or name a video or camera:N")
     reasons = "; ".join(f"{r.path.name}: {r.reason}" for r in files[:3])
     more = f" (and {len(files) - 3} more)" if len(files) > 3 else ""
     return f"{inputs}: none of its {len(files)} files is a usable photo ({reasons}{more})"

@@ -107,7 +107,9 @@ def check_output(path: Path, what: str, **kwargs) -> None:
 
 def require_capture(folder: Path) -> None:
     if not (folder / "capture.json").exists():
-        photos = folder.is_dir() and any(p.suffix.lower() in (".jpg", ".jpeg", ".png") for p in folder.iterdir())
+        from ..capture.photo_formats import is_photo
+
+        photos = folder.is_dir() and any(is_photo(p) for p in folder.iterdir())
         if photos:  # a photo folder given where a capture was expected: capture it into a new folder
             target = folder.parent / f"{folder.name}_capture"
             raise LirmUserError(f"{folder} holds photos, not a capture (no capture.json); make a capture of them first "

@@ -48,7 +48,7 @@ def messy_folder(shared_data, tmp_path_factory) -> Path:
     Image.open(_fox(shared_data, 7)).save(folder / "rotated.jpg", exif=exif.tobytes(), quality=92)
     grey16 = (np.linspace(0, 65535, 120)[None, :] * np.ones((90, 1))).astype(np.uint16)
     cv2.imwrite(str(folder / "grey16.png"), grey16)
-    cv2.imwrite(str(folder / "sketch.bmp"), np.zeros((80, 80, 3), np.uint8))
+    (folder / "sketch.psd").write_bytes(b"8BPS" + bytes(60))
     (folder / "notes.txt").write_text("shot on a cloudy day\n")
     (folder / "transforms.json").write_text("{}\n")
     for p in folder.iterdir():
@@ -76,7 +76,7 @@ def test_every_file_is_reported_with_a_reason(first_ingest, messy_folder):
     assert "not an image" in by_name["bad.jpg"].reason
     assert "too small (1x1" in by_name["tiny.png"].reason
     assert by_name["fox_02_copy.jpg"].reason == "duplicate of fox_02.jpg (frame 0002)"
-    assert "not an image type" in by_name["sketch.bmp"].reason
+    assert "PSD is not read here" in by_name["sketch.psd"].reason
     assert by_name["notes.txt"].reason == by_name["transforms.json"].reason == SIDE_FILE_REASON
     assert [r.frame_id for r in records] == [f"{i:04d}" for i in range(1, 9)]
     assert {by_name[name].frame_id for name in accepted} == {r.frame_id for r in records}
