@@ -49,6 +49,7 @@ from typing import Any, Callable, Iterator, Sequence
 import numpy as np
 
 from lirm.engine.cameras import Camera, colmap_to_c2w
+from lirm.engine.capture.exif_focal import shared_focal_prior
 from lirm.engine.capture.ingest import Cancelled  # one cancellation type for every capture stage
 from lirm.engine.capture.records import ImageRecord, PosingResult
 from lirm.engine.errors import LirmUserError
@@ -106,6 +107,10 @@ class ColmapConfig:
     camera_model: str = "SIMPLE_RADIAL"  # one of SUPPORTED_CAMERA_MODELS
     # One camera (shared intrinsics) per image size; False gives every image its own camera.
     single_camera: bool = True
+    # Start from (and trust) the photos' EXIF focal length where they all give one. Off by default: on
+    # the fox's sparse subsets it broke as many models as it mended; the pose stage uses it only to
+    # pose again when a model's focal length disagrees with the EXIF one (exif_focal.py).
+    use_exif_focal: bool = False
     matcher: str = "auto"  # auto | exhaustive | sequential
     exhaustive_max: int = 60  # auto: exhaustive up to this many images, sequential above
     sequential_overlap: int = 10  # sequential: each image is matched with this many next ones
@@ -358,9 +363,13 @@ def _extract(pycolmap: Any, db: Path, image_dir: Path, images: Sequence[ImageRec
     groups: dict[tuple[int, int], list[str]] = {}
     for rec in images:
         groups.setdefault((rec.width, rec.height), []).append(_image_name(rec))
+    priors = {size: shared_focal_prior([r for r in images if (r.width, r.height) == size]) for size in groups}
     for size, names in groups.items():
         reader = pycolmap.ImageReaderOptions()
         reader.camera_model = config.camera_model.upper()
+        if config.use_exif_focal and priors[size] is not None:
+            # COLMAP marks a camera given parameters as having a prior focal length.
+            reader.camera_params = _camera_params_with_focal(reader.camera_model, priors[size], *size)
         if config.single_camera and existing_cameras and size in existing_cameras:
             reader.existing_camera_id = existing_cameras[size]
         mode = pycolmap.CameraMode.SINGLE if config.single_camera else pycolmap.CameraMode.PER_IMAGE
@@ -368,6 +377,21 @@ def _extract(pycolmap: Any, db: Path, image_dir: Path, images: Sequence[ImageRec
             db, image_dir, image_names=sorted(names), camera_mode=mode, reader_options=reader,
             extraction_options=extraction, device=pycolmap.Device.cpu, cancellation_token=token,
         )
+
+
+def _camera_params_with_focal(model: str, focal: float, width: int, height: int) -> str:
+    """COLMAP's parameter string for `model` with this focal length, the principal point at the
+    image's centre and no distortion."""
+    cx, cy = width / 2.0, height / 2.0
+    params = {
+        "SIMPLE_PINHOLE": [focal, cx, cy],
+        "PINHOLE": [focal, focal, cx, cy],
+        "SIMPLE_RADIAL": [focal, cx, cy, 0.0],
+        "RADIAL": [focal, cx, cy, 0.0, 0.0],
+        "OPENCV": [focal, focal, cx, cy, 0.0, 0.0, 0.0, 0.0],
+        "FULL_OPENCV": [focal, focal, cx, cy] + [0.0] * 8,
+    }[model]
+    return ",".join(f"{p:.6g}" for p in params)
 
 
 def _matching_options(pycolmap: Any, config: ColmapConfig) -> Any:

@@ -38,6 +38,7 @@ from lirm.engine.errors import LirmUserError
 from lirm.engine.io.atomic_files import atomic_write_bytes
 from lirm.engine.io.images import write_png
 
+from .exif_focal import focal_prior_pixels
 from .photo_formats import FORMATS_IN_WORDS, HEIF_SUFFIXES, enable_heif, is_photo, photo_stems, raw_reason, unread_type_reason
 from .records import FileReport, ImageRecord
 
@@ -192,9 +193,10 @@ def _jpeg_has_end(data: bytes) -> bool:
     return False
 
 
-def decode_image(data: bytes, max_side: int) -> tuple[np.ndarray, tuple[int, int]]:
-    """Bytes -> (upright 8-bit RGB or RGBA array capped at max_side, upright full size (w, h)).
-    RGBA only when some pixel is actually transparent. Raises Unreadable with the reason."""
+def decode_image(data: bytes, max_side: int) -> tuple[np.ndarray, tuple[int, int], float | None]:
+    """Bytes -> (upright 8-bit RGB or RGBA array capped at max_side, upright full size (w, h), the
+    EXIF focal length in pixels of that array or None). RGBA only when some pixel is actually
+    transparent. Raises Unreadable with the reason."""
     enable_heif()  # by content, not by name: a HEIC saved as .jpg opens too
     try:
         image = Image.open(io.BytesIO(data))
@@ -220,9 +222,11 @@ def decode_image(data: bytes, max_side: int) -> tuple[np.ndarray, tuple[int, int
         orientation = int(image.getexif().get(0x0112, 1))
     except Exception:  # damaged EXIF must not cost the photo: it is used as stored
         orientation = 1
+    upright = np.ascontiguousarray(apply_orientation(rgb, orientation))
+    focal = focal_prior_pixels(image, (full_w, full_h), (upright.shape[1], upright.shape[0]))
     if orientation in (5, 6, 7, 8):
         full_w, full_h = full_h, full_w
-    return np.ascontiguousarray(apply_orientation(rgb, orientation)), (full_w, full_h)
+    return upright, (full_w, full_h), focal
 
 
 def apply_orientation(image: np.ndarray, orientation: int) -> np.ndarray:
@@ -319,7 +323,7 @@ def _check_and_add(path, capture_root, config, ids, by_hash, thumbs, used_origin
     sha = hashlib.sha256(data).hexdigest()
     if sha in by_hash:
         return f"duplicate of {by_hash[sha]}"
-    rgb, (full_w, full_h) = decode_image(data, config.max_side)
+    rgb, (full_w, full_h), focal_prior = decode_image(data, config.max_side)
     if min(full_w, full_h) < config.min_side:
         return f"too small ({full_w}x{full_h}; at least {config.min_side} pixels a side are needed)"
     thumb = thumbnail(rgb)
@@ -340,7 +344,7 @@ def _check_and_add(path, capture_root, config, ids, by_hash, thumbs, used_origin
         raise LirmUserError(f"{capture_root}: cannot write into the capture folder ({err}); "
                             "check free disk space and permissions") from err
     record = ImageRecord(frame_id=frame_id, original=original, image=image_path, width=rgb.shape[1], height=rgb.shape[0],
-                         sha256=sha, has_alpha=rgb.shape[2] == 4, origin="photo")
+                         sha256=sha, has_alpha=rgb.shape[2] == 4, origin="photo", focal_prior_px=focal_prior)
     records.append(record)
     by_hash[sha] = describe(record)
     thumbs.add(thumb, describe(record))

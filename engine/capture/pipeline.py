@@ -24,6 +24,7 @@ from .plain_backdrop import BACKDROP, PlainBackdropConfig, plain_backdrop_captur
 from .pose_silhouettes import PoseSilhouetteConfig, views_against_silhouettes
 from .capture_folder import Capture, FrameState
 from .colmap_posing import ColmapConfig, extend_colmap_pose, map_again_without, pose_with_colmap
+from .focal_check import pose_again_if_focal_is_off
 from .crop import CropConfig, EmptyMaskError, prepare_view
 from ..lighting.camera_response import RESPONSES, response_for_capture
 from ..lighting.capture_lighting import CaptureLightingConfig, estimate_capture_lighting
@@ -271,6 +272,9 @@ def _pose(capture: Capture, config: CaptureConfig, progress, cancel, new_frames)
             result = extend_colmap_pose(work, new_records, capture.root, config=config.colmap, progress=pose_progress, cancel=cancel)
         else:
             result = pose_with_colmap(records, capture.root, work, config=config.colmap, progress=pose_progress, cancel=cancel)
+            result, note = pose_again_if_focal_is_off(result, records, capture.root, work, config.colmap, pose_progress, cancel)
+            if note:
+                capture.log("focal length check", note=note)
     _apply_posing(capture, result)
     if new_frames:  # a new structure-from-motion frame: normalise again
         capture.settings["completed"] = [s for s in capture.settings.get("completed", []) if s == "pose"]

@@ -39,6 +39,7 @@ class ImageRecord:
     has_alpha: bool = False
     origin: str = "photo"  # photo | video | camera
     timestamp_s: float | None = None  # for video and camera frames
+    focal_prior_px: float | None = None  # the lens's focal length from EXIF, in working-copy pixels (exif_focal.py)
 
 
 @dataclass

@@ -19,6 +19,9 @@ def format_capture_report(summary: CaptureSummary, reference: Path | None = None
     for frame_id, state in sorted(capture.frames.items()):
         if state.pose_status != "registered":
             lines.append(f"    {state.record.original.name} ({frame_id}): {state.pose_status}")
+    focal_note = _focal_check_of_last_pose(capture.history)
+    if focal_note:  # COLMAP's model disagreed with the lens (focal_check.py)
+        lines.append(f"  focal length: {focal_note}")
     points_for_imported = [e for e in capture.history if e.get("action") == "points for imported poses"]
     if points_for_imported:  # imported poses with automatic masks: where their seeds came from, or why none did
         lines.append(f"  points for the automatic masks: {points_for_imported[-1].get('note')}")
@@ -61,6 +64,17 @@ def _lighting_line(capture) -> str:
             f"{100 * last['seen']:.0f}% of directions seen (the rest filled smoothly, not measured), "
             f"{100 * last['clipped']:.0f}% of the seen ones clipped"
             + (f"; the photos read as plain sRGB ({last.get('camera_response_why')})" if last.get("camera_response") == "srgb" else ""))
+
+
+def _focal_check_of_last_pose(history: list[dict]) -> str | None:
+    """The focal length check's note of the latest posing (logged just before its "pose" entry)."""
+    pending = current = None
+    for entry in history:
+        if entry.get("action") == "focal length check":
+            pending = entry.get("note")
+        elif entry.get("action") == "pose":
+            current, pending = pending, None
+    return current
 
 
 def _reference_errors(capture, reference: Path) -> str:
