@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import struct
 from pathlib import Path
 
 import cv2
@@ -132,3 +133,35 @@ def test_unreadable_sources_name_themselves(tmp_path, panning_video):
     with pytest.raises(Cancelled):
         select_video_frames(panning_video, tmp_path / "cap", cancel=lambda: True)
     assert not (tmp_path / "cap").exists()  # nothing is written before the whole stream is read
+
+
+def _tag_as_turned_clockwise(path: Path) -> None:
+    """Set the MP4 track header's display matrix to a quarter turn clockwise, as a phone held upright
+    writes its landscape sensor's frames (ISO/IEC 14496-12 tkhd, version 0: the matrix 36 bytes in)."""
+    data = bytearray(path.read_bytes())
+    box = data.find(b"tkhd") - 4
+    assert box >= 0 and data[box + 8] == 0, "a version-0 track header"
+    matrix = box + 8 + 4 + 20 + 8 + 8  # header, version/flags, times/track/duration, reserved, layer..volume
+    assert struct.unpack(">9i", data[matrix:matrix + 36]) == (65536, 0, 0, 0, 65536, 0, 0, 0, 1 << 30)
+    struct.pack_into(">9i", data, matrix, 0, 65536, 0, -65536, 0, 0, 0, 0, 1 << 30)
+    path.write_bytes(bytes(data))
+
+
+def test_a_phones_upright_video_gives_upright_frames(tmp_path):
+    """Phones store portrait video as landscape frames with a rotation in the file: the frames must come
+    out turned, or the capture's world would lie on its side (its up is the cameras' average up)."""
+    path = tmp_path / "portrait.mp4"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), FPS, (320, 240))
+    assert writer.isOpened()
+    tex = _texture()
+    stored = [tex[:, 4 * i:4 * i + 320].copy() for i in range(N)]
+    for frame in stored:
+        writer.write(frame)
+    writer.release()
+    _tag_as_turned_clockwise(path)
+    records, _ = select_video_frames(path, tmp_path / "capture")
+    assert records and all((r.width, r.height) == (240, 320) for r in records)
+    first = cv2.imread(str(tmp_path / "capture" / records[0].image))
+    upright = np.rot90(stored[_index(records[0])], k=-1)
+    assert np.abs(first.astype(float) - upright).mean() < 12  # two lossy encodings of the same picture
+    assert np.abs(first.astype(float) - np.rot90(stored[_index(records[0])], k=1)).mean() > 30
