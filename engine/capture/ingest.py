@@ -40,7 +40,7 @@ from lirm.engine.io.images import write_png
 
 from .colour_profiles import embedded_profile, to_srgb
 from .exif_focal import focal_prior_pixels
-from .photo_formats import FORMATS_IN_WORDS, HEIF_SUFFIXES, enable_heif, is_photo, photo_stems, raw_reason, unread_type_reason
+from .photo_formats import FORMATS_IN_WORDS, HEIF_SUFFIXES, companion_reason, enable_heif, is_photo, photo_stems, unread_type_reason
 from .records import FileReport, ImageRecord
 
 # Files that travel with photos (exports, sidecars, OS litter): skipped without sounding an alarm.
@@ -286,7 +286,7 @@ def ingest_photos(
     by_hash = {r.sha256: describe(r) for r in existing}
     thumbs = ThumbnailIndex.of_capture(existing, capture_root, config.near_duplicate_tolerance)
     used_original_names = {r.original.name for r in existing if not r.original.is_absolute()}
-    raw_twins = photo_stems(files)
+    photo_twins = photo_stems(files)
 
     total = len(files)
     if progress is not None:
@@ -297,7 +297,7 @@ def ingest_photos(
         report = FileReport(path=path, accepted=False)
         reports.append(report)
         try:
-            report.reason = (raw_reason(path, raw_twins)
+            report.reason = (companion_reason(path, photo_twins)
                              or _check_and_add(path, capture_root, config, ids, by_hash, thumbs, used_original_names, records, report))
         except Unreadable as err:
             report.reason = str(err)

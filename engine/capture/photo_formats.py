@@ -11,7 +11,8 @@ decode once, here; nothing after ingest sees the original's format.
 - Camera raw files are not developed here: white balance, demosaicing and a tone curve are a raw
   developer's choices, and the capture's lighting reads photos as display-referred pictures. A raw
   file beside a photo of the same name (a camera set to RAW + JPEG) is a side file and its photo is
-  used; a raw file alone is skipped with the fix.
+  used; a raw file alone is skipped with the fix. The clip of an iPhone's Live Photo beside its photo
+  is skipped as such (a video is captured on its own: `lirm capture VIDEO`).
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ PHOTO_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".webp", ".bmp", ".h
 HEIF_SUFFIXES = (".heic", ".heif")
 RAW_SUFFIXES = frozenset({".dng", ".cr2", ".cr3", ".crw", ".nef", ".nrw", ".arw", ".srf", ".sr2", ".raf", ".orf",
                           ".rw2", ".pef", ".srw", ".x3f", ".3fr", ".iiq", ".rwl", ".erf", ".kdc", ".mrw", ".raw"})
+VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".webm", ".m4v")
+LIVE_PHOTO_SUFFIXES = frozenset({".mov", ".mp4"})  # an iPhone's Live Photo: IMG_0001.HEIC with IMG_0001.MOV
 FORMATS_IN_WORDS = "JPEG, PNG, TIFF, WebP, BMP or HEIC"
 
 _heif_ready: bool | None = None
@@ -51,11 +54,16 @@ def photo_stems(paths: Iterable[Path]) -> set[tuple[Path, str]]:
     return {(p.parent, p.stem.lower()) for p in paths if is_photo(p)}
 
 
-def raw_reason(path: Path, stems: set[tuple[Path, str]]) -> str | None:
-    """The report's reason for a camera raw file, or None when `path` is not one."""
-    if path.suffix.lower() not in RAW_SUFFIXES or path.name.startswith("."):
+def companion_reason(path: Path, stems: set[tuple[Path, str]]) -> str | None:
+    """The report's reason for a camera raw file, or for a Live Photo's clip beside its photo; None
+    when `path` is neither."""
+    suffix = path.suffix.lower()
+    if path.name.startswith(".") or suffix not in RAW_SUFFIXES | LIVE_PHOTO_SUFFIXES:
         return None
-    if (path.parent, path.stem.lower()) in stems:
+    twin = (path.parent, path.stem.lower()) in stems
+    if suffix in LIVE_PHOTO_SUFFIXES:  # a video alone is not a companion: the folder's report says what it is
+        return "a Live Photo's clip beside its photo of the same name: the photo is used" if twin else None
+    if twin:
         return "camera raw beside its photo of the same name (RAW + JPEG): the photo is used"
     return (f"camera raw ({path.suffix.upper().lstrip('.')}) is not developed here: use the camera's JPEG, or "
             f"export the raw files as JPEG or 16-bit TIFF from a raw developer and import those")
@@ -64,6 +72,8 @@ def raw_reason(path: Path, stems: set[tuple[Path, str]]) -> str | None:
 def unread_type_reason(path: Path) -> str:
     """The report's reason for a file type that is neither a photo, a raw file nor a known side file."""
     suffix = path.suffix.lower()
+    if suffix in VIDEO_SUFFIXES:
+        return f"a video among photos: a video is captured on its own (`lirm capture {path}`)"
     if suffix in (".avif", ".jxl", ".gif", ".psd", ".exr", ".hdr"):
         return f"{suffix.lstrip('.').upper()} is not read here; save the photo as {FORMATS_IN_WORDS}"
     return f"not an image type we read ({FORMATS_IN_WORDS})"

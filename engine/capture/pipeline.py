@@ -37,10 +37,9 @@ from .normalize import NormalizeConfig, estimate_normalization, is_floor
 from .pose_import import import_colmap_model, import_transforms_json
 from .records import PosingResult
 from .undistort import undistort_image
-from .photo_formats import FORMATS_IN_WORDS
+from .photo_formats import FORMATS_IN_WORDS, VIDEO_SUFFIXES
 from .video_frames import VideoConfig, select_video_frames
 
-VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".webm", ".m4v")
 STAGES = ("ingest", "pose", "normalize", "masks", "crops")
 STAGE_WORDS = {"pose": "pose the photos (COLMAP)", "masks": "write the masks", "crops": "prepare the network's crops",
                "lighting": "estimate the lighting the photos were taken in"}

@@ -53,6 +53,8 @@ def formats_folder(shared_data, tmp_path_factory) -> tuple[Path, dict[str, np.nd
     upright["DSC_0030.JPG"] = rgb
     (folder / "DSC_0030.NEF").write_bytes(b"II*\x00" + bytes(200))
     (folder / "DSC_0031.NEF").write_bytes(b"II*\x00" + bytes(200))
+    (folder / "IMG_0001.MOV").write_bytes(bytes(64))  # the Live Photo's clip beside the HEIC
+    (folder / "walkaround.mp4").write_bytes(bytes(64))
     for p in folder.iterdir():
         p.chmod(0o444)
     return folder, upright
@@ -70,13 +72,15 @@ def test_heic_tiff_and_webp_become_upright_working_copies(formats_folder, tmp_pa
         assert (tmp_path / by_name[name].original).read_bytes() == (folder / name).read_bytes()
 
 
-def test_raw_files_are_explained_not_read(formats_folder, tmp_path):
+def test_raw_files_and_videos_are_explained_not_read(formats_folder, tmp_path):
     folder, _ = formats_folder
     _, reports = ingest_photos(folder, tmp_path)
     by_name = {r.path.name: r for r in reports}
     assert not by_name["DSC_0030.NEF"].accepted and "the photo is used" in by_name["DSC_0030.NEF"].reason
     lone = by_name["DSC_0031.NEF"]
     assert not lone.accepted and "NEF" in lone.reason and "export the raw files as JPEG or 16-bit TIFF" in lone.reason
+    assert "Live Photo's clip beside its photo" in by_name["IMG_0001.MOV"].reason
+    assert "a video is captured on its own (`lirm capture " in by_name["walkaround.mp4"].reason
 
 
 def test_a_heic_named_jpg_still_opens(formats_folder, tmp_path):
