@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from lirm.engine.capture.capture_folder import Capture
+from lirm.engine.capture.ingest import SIDE_FILE_REASON
 from lirm.engine.errors import LirmUserError
 
 from .app_state import AppState, FrameInfo
@@ -95,6 +96,8 @@ class AppActions:
             frames.append(FrameInfo(fid, f.record.original.name, fid in capture.cameras, f.pose_status, f.mask_status,
                                     capture.prepared_path(fid).is_file(), used_in.get(fid)))
         self.state.frames = frames
+        self.state.skipped_files = [(Path(r.path).name, r.reason) for r in capture.reports
+                                    if not r.accepted and r.reason != SIDE_FILE_REASON]
         self.state.updates = list(capture.updates)
         self.state.weights = capture.updates[-1].get("weights", "") if capture.updates else ""
         self.state.real_size = capture.settings.get("real_size")
@@ -143,14 +146,27 @@ class AppActions:
 
         def done(job: Job) -> None:
             if job.state == "finished":
-                if adding and any("nothing new was added" in line for line in job.output):
+                nothing_new = adding and any("nothing new was added" in line for line in job.output)
+                if nothing_new:
                     self.state.say(f"{inputs}: every photo is already in {target} (or was skipped): nothing new was added", "warning")
+                before = set(self.state.skipped_files) if adding else set()
                 self.open_capture(target)
+                if not nothing_new:
+                    self._say_skipped([s for s in self.state.skipped_files if s not in before], inputs)
             elif job.state == "failed":
                 self.state.say(f"importing {inputs} failed: {job.error_text()}", "error")
             else:
                 self.state.say(f"importing {inputs} was cancelled; `lirm capture {target} --resume` finishes it")
         return self._start("capture", f"posing and masking {Path(inputs).name}", args, done)
+
+    def _say_skipped(self, skipped: list[tuple[str, str]], inputs: str) -> None:
+        """After an import: which files it did not take, and why (the Capture panel lists them all)."""
+        if not skipped:
+            return
+        shown = "; ".join(f"{name}: {why}" for name, why in skipped[:2])
+        more = f"; and {len(skipped) - 2} more" if len(skipped) > 2 else ""
+        self.state.say(f"{len(skipped)} file{'s' if len(skipped) > 1 else ''} of {Path(inputs).name} not imported: "
+                       f"{shown}{more} (listed in Capture)", "warning")
 
     def open_demo_capture(self, folder: str | Path | None = None, reconstruct: bool = False) -> Job | None:
         """The built-in demo capture (the mug of `lirm demo`), made once and reused; with `reconstruct`,

@@ -87,6 +87,8 @@ class SavedChoices:
 class AppState:
     capture_dir: Path | None = None
     frames: list[FrameInfo] = field(default_factory=list)
+    # (file name, why) of the files an import did not take, side files (notes, sidecars) left out
+    skipped_files: list[tuple[str, str]] = field(default_factory=list)
     updates: list[dict] = field(default_factory=list)  # capture.json's update history
     choices: SavedChoices = field(default_factory=SavedChoices)
     weights: str = ""  # which weights the reconstruction used, and whether they are trained

@@ -45,6 +45,8 @@ class CapturePanel:
         imgui.text_wrapped(str(state.capture_dir))
         posed = sum(f.posed for f in state.frames)
         imgui.text_wrapped(f"{len(state.frames)} photos, {posed} posed; next update: {', '.join(actions.next_views()) or 'none left'}")
+        if state.skipped_files:
+            self._skipped_files(state.skipped_files)
         if imgui.small_button("Clear picks"):
             actions.select_views([])
         imgui.same_line()
@@ -97,6 +99,19 @@ class CapturePanel:
             imgui.end_table()
         if self.inspected is not None:
             self._inspect(self.inspected)
+
+    def _skipped_files(self, skipped: list[tuple[str, str]]) -> None:
+        """The files the imports did not take, each with why (folded by default: a RAW + JPEG folder
+        names every raw file)."""
+        label = f"{len(skipped)} file{'s' if len(skipped) > 1 else ''} not imported##skipped_files"
+        opened = imgui.tree_node(label)
+        self.app.note_widget("skipped_files")
+        if opened:
+            for name, why in skipped:
+                coloured(name, "warning")
+                imgui.same_line()
+                imgui.text_wrapped(why)
+            imgui.tree_pop()
 
     def _inspect(self, frame_id: str) -> None:
         """The view with its mask tinted; drag a box round the object and fix the mask with it."""

@@ -28,6 +28,9 @@ def test_unposed_views_leave_the_names_their_room(lego_capture, tmp_path, script
     data["cameras"].pop(left_out)
     (capture / "prepared" / f"{left_out}.npz").unlink()
     data["frames"][-2]["mask_status"] = "touches the border on all four sides: it probably includes background"
+    data["reports"] = data.get("reports", []) + [
+        {"path": "/photos/IMG_0031.NEF", "accepted": False, "reason": "camera raw (NEF) is not developed here: ..."},
+        {"path": "/photos/notes.txt", "accepted": False, "reason": "side file, not a photo"}]
     (capture / "capture.json").write_text(json.dumps(data))
     result = scripted_session([
         {"frames": 2}, {"action": "open_capture", "args": [str(capture)]}, {"frames": 3},
@@ -37,3 +40,5 @@ def test_unposed_views_leave_the_names_their_room(lego_capture, tmp_path, script
     widths = [x1 - x0 for x0, _, x1, _ in names.values()]
     # "r_35.png" is about 60 pixels in the app's font; the long reason had left the column 14.
     assert min(widths) >= 80, widths
+    # The file an import did not take is listed (folded), the side file is not.
+    assert "skipped_files" in result["widgets"]

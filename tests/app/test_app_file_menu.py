@@ -28,6 +28,9 @@ def test_new_project_add_photos_and_recent_from_the_file_menu(lego_capture, shar
     photos.mkdir()
     for p in sorted((shared_data / "real_instantngp_fox" / "images").glob("*.jpg"))[:8]:
         shutil.copy(p, photos / p.name)
+    whole = (photos / "0008.jpg").read_bytes()
+    (photos / "broken.jpg").write_bytes(whole[: len(whole) // 2])  # a copy that did not finish
+    (photos / "notes.txt").write_text("shot at noon\n")  # a side file: not worth a warning
     clicked, helped = tmp_path / "clicked", tmp_path / "helped"
     script = {"out": str(tmp_path / "out"), "steps": [
         {"frames": 2}, {"action": "open_capture", "args": [str(capture)]}, {"frames": 2},
@@ -81,6 +84,10 @@ def test_new_project_add_photos_and_recent_from_the_file_menu(lego_capture, shar
     assert (new / "capture.json").is_file()
     messages = [m["text"] for m in result["messages"]]
     assert any(m.startswith(f"opened {new}") for m in messages), messages
+    # The import says which file it did not take and why (side files aside); the panel lists it.
+    skipped = [m for m in messages if "not imported" in m]
+    assert len(skipped) == 1 and skipped[0].startswith("1 file of fox not imported: broken.jpg: the file is cut short"), messages
+    assert "notes.txt" not in skipped[0]
     assert len(json.loads((capture / "capture.json").read_text())["frames"]) == len(
         json.loads((lego_capture / "capture.json").read_text())["frames"])
     # Adding the same photos again says nothing was added.
