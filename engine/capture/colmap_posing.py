@@ -38,6 +38,7 @@ import contextlib
 import dataclasses
 import json
 import logging
+import math
 import os
 import shutil
 import tempfile
@@ -87,6 +88,7 @@ STATUS_SEPARATE_MODEL = "registered in a smaller separate model (a different obj
 # usual cause is too little viewpoint change between them, which the user can fix by moving more.
 STATUS_NO_START = "not registered (no two photos with enough matches and viewpoint change to start a model)"
 
+LENS_TOLERANCE = 0.1  # EXIF focal lengths this close (relative) are one lens: a zoom moved less is one camera
 SUPPORTED_CAMERA_MODELS = ("SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL", "RADIAL", "OPENCV", "FULL_OPENCV")
 
 DB_NAME = "database.db"
@@ -354,29 +356,51 @@ def _check_records(images: Sequence[ImageRecord]) -> None:
 
 
 def _extract(pycolmap: Any, db: Path, image_dir: Path, images: Sequence[ImageRecord], config: ColmapConfig,
-             token: Any, existing_cameras: dict[tuple[int, int], int] | None = None) -> None:
-    """SIFT on the CPU; one camera per image size (or per image), reusing existing_cameras'
-    camera ids by size so added photos share the calibrated intrinsics."""
+             token: Any, existing_cameras: dict[tuple[int, int], list[tuple[int, float]]] | None = None) -> None:
+    """SIFT on the CPU; one camera per image size and lens (or per image), reusing an existing camera
+    of the same size (`existing_cameras`: size -> [(camera id, focal length px)]) so added photos
+    share the calibrated intrinsics, unless their EXIF says another lens."""
     extraction = pycolmap.FeatureExtractionOptions()
     extraction.sift.max_num_features = int(config.max_features)
     extraction.num_threads = int(config.num_threads)
-    groups: dict[tuple[int, int], list[str]] = {}
-    for rec in images:
-        groups.setdefault((rec.width, rec.height), []).append(_image_name(rec))
-    priors = {size: shared_focal_prior([r for r in images if (r.width, r.height) == size]) for size in groups}
-    for size, names in groups.items():
+    for (width, height, _), group in camera_groups(images).items():
+        size = (width, height)
+        prior = shared_focal_prior(group, tolerance=LENS_TOLERANCE)
         reader = pycolmap.ImageReaderOptions()
         reader.camera_model = config.camera_model.upper()
-        if config.use_exif_focal and priors[size] is not None:
+        if config.use_exif_focal and prior is not None:
             # COLMAP marks a camera given parameters as having a prior focal length.
-            reader.camera_params = _camera_params_with_focal(reader.camera_model, priors[size], *size)
-        if config.single_camera and existing_cameras and size in existing_cameras:
-            reader.existing_camera_id = existing_cameras[size]
+            reader.camera_params = _camera_params_with_focal(reader.camera_model, prior, *size)
+        if config.single_camera and existing_cameras:
+            same_lens = [cid for cid, focal in existing_cameras.get(size, [])
+                         if prior is None or abs(math.log(focal / prior)) <= math.log(1 + 1.5 * LENS_TOLERANCE)]
+            if same_lens:
+                reader.existing_camera_id = same_lens[0]
         mode = pycolmap.CameraMode.SINGLE if config.single_camera else pycolmap.CameraMode.PER_IMAGE
         pycolmap.extract_features(
-            db, image_dir, image_names=sorted(names), camera_mode=mode, reader_options=reader,
+            db, image_dir, image_names=sorted(_image_name(r) for r in group), camera_mode=mode, reader_options=reader,
             extraction_options=extraction, device=pycolmap.Device.cpu, cancellation_token=token,
         )
+
+
+def camera_groups(images: Sequence[ImageRecord]) -> dict[tuple[int, int, int], list[ImageRecord]]:
+    """The photos that share one COLMAP camera: the same image size and, where EXIF gives focal
+    lengths, the same lens (within LENS_TOLERANCE of the group's first, in increasing focal length).
+    A phone that switches to its 2x camera keeps the image size; one camera for both would hold
+    neither's focal length. Photos without an EXIF focal length share their size's group 0."""
+    groups: dict[tuple[int, int, int], list[ImageRecord]] = {}
+    for rec in sorted(images, key=lambda r: r.focal_prior_px or 0.0):
+        size = (rec.width, rec.height)
+        if rec.focal_prior_px is None:
+            groups.setdefault((*size, 0), []).append(rec)
+            continue
+        lenses = [key for key in groups if key[:2] == size and key[2] > 0]
+        last = max(lenses, key=lambda key: key[2], default=None)
+        if last is not None and rec.focal_prior_px <= groups[last][0].focal_prior_px * (1 + LENS_TOLERANCE):
+            groups[last].append(rec)
+        else:
+            groups[(*size, 1 + (last[2] if last else 0))] = [rec]
+    return groups
 
 
 def _camera_params_with_focal(model: str, focal: float, width: int, height: int) -> str:
@@ -709,11 +733,11 @@ def extend_colmap_pose(
             with pycolmap.Database.open(db) as database:
                 db_images = database.read_all_images()
                 cams = {c.camera_id: c for c in database.read_all_cameras()}
-            existing: dict[tuple[int, int], int] = {}
-            for im in db_images:
-                c = cams.get(im.camera_id)
-                if c is not None:
-                    existing.setdefault((int(c.width), int(c.height)), im.camera_id)
+            existing: dict[tuple[int, int], list[tuple[int, float]]] = {}
+            for camera_id in sorted({im.camera_id for im in db_images}):
+                c = prev.cameras[camera_id] if prev is not None and camera_id in prev.cameras else cams.get(camera_id)
+                if c is not None:  # the model's calibrated focal length where it has one
+                    existing.setdefault((int(c.width), int(c.height)), []).append((camera_id, float(c.mean_focal_length())))
             _check_cancel(cancel)
             _report(progress, "extract", 0, len(new))
             _extract(pycolmap, db, image_dir, new, config, token, existing)
