@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from ..lighting.capture_lighting import last_lighting_stage_entry
 from .pipeline import CaptureSummary
 
@@ -19,6 +21,9 @@ def format_capture_report(summary: CaptureSummary, reference: Path | None = None
     for frame_id, state in sorted(capture.frames.items()):
         if state.pose_status != "registered":
             lines.append(f"    {state.record.original.name} ({frame_id}): {state.pose_status}")
+    lens_line = _lens_line(capture.records)
+    if lens_line:
+        lines.append(lens_line)
     focal_note = _focal_check_of_last_pose(capture.history)
     if focal_note:  # COLMAP's model disagreed with the lens (focal_check.py)
         lines.append(f"  focal length: {focal_note}")
@@ -64,6 +69,25 @@ def _lighting_line(capture) -> str:
             f"{100 * last['seen']:.0f}% of directions seen (the rest filled smoothly, not measured), "
             f"{100 * last['clipped']:.0f}% of the seen ones clipped"
             + (f"; the photos read as plain sRGB ({last.get('camera_response_why')})" if last.get("camera_response") == "srgb" else ""))
+
+
+def _lens_line(records) -> str | None:
+    """What the photos' EXIF said of the lens (exif_focal.py), when any photo has it: focal lengths
+    within LENS_TOLERANCE of each other are one lens (portrait and landscape photos included)."""
+    from .colmap_posing import LENS_TOLERANCE
+
+    focals = sorted(r.focal_prior_px for r in records if r.focal_prior_px)
+    if not focals:
+        return None
+    lenses: list[list[float]] = []
+    for focal in focals:
+        if lenses and focal <= lenses[-1][0] * (1 + LENS_TOLERANCE):
+            lenses[-1].append(focal)
+        else:
+            lenses.append([focal])
+    shown = ", ".join(f"{round(float(np.median(lens)))} px" for lens in lenses)
+    return (f"  focal length from EXIF: {len(focals)} of {len(records)} photos, {len(lenses)} "
+            f"lens{'es' if len(lenses) > 1 else ''} ({shown} in the working images)")
 
 
 def _focal_check_of_last_pose(history: list[dict]) -> str | None:

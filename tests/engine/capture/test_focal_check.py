@@ -73,3 +73,11 @@ def test_a_wrong_sparse_model_is_posed_again_from_the_lens(five_sparse_fox_photo
     if disagrees(focal_ratio(first, records), 1.25):  # COLMAP 4.x: 3 photos, focal length 1.53 x, 30 degrees off
         assert note is not None and "posed again from the EXIF focal length: 5 registered" in note
         assert (tmp_path / "colmap" / "sparse").exists() and not (tmp_path / "colmap-exif-focal").exists()
+
+
+def test_the_report_says_what_the_exif_gave():
+    from lirm.engine.capture.report import _lens_line
+
+    records = [_record("1", 688.0), _record("2", 690.0), _record("3", 1376.0), _record("4", None)]
+    assert _lens_line(records) == "  focal length from EXIF: 3 of 4 photos, 2 lenses (689 px, 1376 px in the working images)"
+    assert _lens_line([_record("1", None)]) is None
