@@ -50,7 +50,7 @@ from typing import Any, Callable, Iterator, Sequence
 import numpy as np
 
 from lirm.engine.cameras import Camera, colmap_to_c2w
-from lirm.engine.capture.exif_focal import shared_focal_prior
+from lirm.engine.capture.exif_focal import LENS_TOLERANCE, shared_focal_prior, split_by_lens
 from lirm.engine.capture.ingest import Cancelled  # one cancellation type for every capture stage
 from lirm.engine.capture.records import ImageRecord, PosingResult
 from lirm.engine.errors import LirmUserError
@@ -88,7 +88,6 @@ STATUS_SEPARATE_MODEL = "registered in a smaller separate model (a different obj
 # usual cause is too little viewpoint change between them, which the user can fix by moving more.
 STATUS_NO_START = "not registered (no two photos with enough matches and viewpoint change to start a model)"
 
-LENS_TOLERANCE = 0.1  # EXIF focal lengths this close (relative) are one lens: a zoom moved less is one camera
 SUPPORTED_CAMERA_MODELS = ("SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL", "RADIAL", "OPENCV", "FULL_OPENCV")
 
 DB_NAME = "database.db"
@@ -388,18 +387,17 @@ def camera_groups(images: Sequence[ImageRecord]) -> dict[tuple[int, int, int], l
     lengths, the same lens (within LENS_TOLERANCE of the group's first, in increasing focal length).
     A phone that switches to its 2x camera keeps the image size; one camera for both would hold
     neither's focal length. Photos without an EXIF focal length share their size's group 0."""
+    by_size: dict[tuple[int, int], list[ImageRecord]] = {}
+    for rec in sorted(images, key=lambda r: r.focal_prior_px or 0.0):  # stable: without EXIF, the photos' order
+        by_size.setdefault((rec.width, rec.height), []).append(rec)
     groups: dict[tuple[int, int, int], list[ImageRecord]] = {}
-    for rec in sorted(images, key=lambda r: r.focal_prior_px or 0.0):
-        size = (rec.width, rec.height)
-        if rec.focal_prior_px is None:
-            groups.setdefault((*size, 0), []).append(rec)
-            continue
-        lenses = [key for key in groups if key[:2] == size and key[2] > 0]
-        last = max(lenses, key=lambda key: key[2], default=None)
-        if last is not None and rec.focal_prior_px <= groups[last][0].focal_prior_px * (1 + LENS_TOLERANCE):
-            groups[last].append(rec)
-        else:
-            groups[(*size, 1 + (last[2] if last else 0))] = [rec]
+    for (width, height), recs in by_size.items():
+        unknown = [r for r in recs if r.focal_prior_px is None]
+        if unknown:
+            groups[(width, height, 0)] = unknown
+        lenses = split_by_lens([r for r in recs if r.focal_prior_px is not None], lambda r: r.focal_prior_px)
+        for lens, group in enumerate(lenses, start=1):
+            groups[(width, height, lens)] = group
     return groups
 
 

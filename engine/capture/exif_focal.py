@@ -33,6 +33,7 @@ FOCAL_PLANE_X_RESOLUTION = 0xA20E
 FOCAL_PLANE_RESOLUTION_UNIT = 0xA210
 MM_PER_UNIT = {2: 25.4, 3: 10.0, 4: 1.0, 5: 0.001}  # inch, cm, mm, micrometre
 PLAUSIBLE_FOV_DEG = (8.0, 150.0)
+LENS_TOLERANCE = 0.1  # EXIF focal lengths this close (relative) are one lens
 
 
 def focal_prior_pixels(image: Image.Image, stored_size: tuple[int, int], working_size: tuple[int, int]) -> float | None:
@@ -57,6 +58,18 @@ def focal_prior_pixels(image: Image.Image, stored_size: tuple[int, int], working
         return None
     fov = math.degrees(2.0 * math.atan(max(width, height) / (2.0 * focal)))
     return focal if PLAUSIBLE_FOV_DEG[0] <= fov <= PLAUSIBLE_FOV_DEG[1] else None
+
+
+def split_by_lens(items, focal_of=lambda focal: focal) -> list[list]:
+    """`items` in increasing focal length, split into lenses: a new lens wherever one is more than
+    LENS_TOLERANCE above its lens's first (a phone's 2x camera; a zoom moved less is one lens)."""
+    lenses: list[list] = []
+    for item in sorted(items, key=focal_of):
+        if lenses and focal_of(item) <= focal_of(lenses[-1][0]) * (1 + LENS_TOLERANCE):
+            lenses[-1].append(item)
+        else:
+            lenses.append([item])
+    return lenses
 
 
 def shared_focal_prior(records, tolerance: float = 0.02) -> float | None:

@@ -74,17 +74,12 @@ def _lighting_line(capture) -> str:
 def _lens_line(records) -> str | None:
     """What the photos' EXIF said of the lens (exif_focal.py), when any photo has it: focal lengths
     within LENS_TOLERANCE of each other are one lens (portrait and landscape photos included)."""
-    from .colmap_posing import LENS_TOLERANCE
+    from .exif_focal import split_by_lens
 
-    focals = sorted(r.focal_prior_px for r in records if r.focal_prior_px)
+    focals = [r.focal_prior_px for r in records if r.focal_prior_px]
     if not focals:
         return None
-    lenses: list[list[float]] = []
-    for focal in focals:
-        if lenses and focal <= lenses[-1][0] * (1 + LENS_TOLERANCE):
-            lenses[-1].append(focal)
-        else:
-            lenses.append([focal])
+    lenses = split_by_lens(focals)
     shown = ", ".join(f"{round(float(np.median(lens)))} px" for lens in lenses)
     return (f"  focal length from EXIF: {len(focals)} of {len(records)} photos, {len(lenses)} "
             f"lens{'es' if len(lenses) > 1 else ''} ({shown} in the working images)")
