@@ -38,7 +38,7 @@ from lirm.engine.errors import LirmUserError
 from lirm.engine.io.atomic_files import atomic_write_bytes
 from lirm.engine.io.images import write_png
 
-from .colour_profiles import embedded_profile, to_srgb
+from .colour_profiles import source_colour_space, to_srgb
 from .exif_focal import focal_prior_pixels
 from .photo_formats import FORMATS_IN_WORDS, HEIF_SUFFIXES, companion_reason, enable_heif, is_photo, photo_stems, unread_type_reason
 from .records import FileReport, ImageRecord
@@ -211,7 +211,7 @@ def decode_image(data: bytes, max_side: int) -> tuple[np.ndarray, tuple[int, int
             image.draft(None, (math.ceil(full_w * f), math.ceil(full_h * f)))
         image.load()
         rgb = cap_long_side(_to_rgb8(image), max_side)
-        rgb = to_srgb(rgb, embedded_profile(image))  # a Display P3 or Adobe RGB photo, as sRGB (colour_profiles.py)
+        rgb = to_srgb(rgb, source_colour_space(image))  # a Display P3 or Adobe RGB photo, as sRGB (colour_profiles.py)
     except Unreadable:
         raise
     except Image.DecompressionBombError as err:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from PIL import Image, ImageCms
 
-from lirm.engine.capture.colour_profiles import embedded_profile, to_srgb
+from lirm.engine.capture.colour_profiles import embedded_profile, nclx_space, to_srgb
 from lirm.engine.capture.ingest import decode_image
 from lirm.engine.capture.photo_formats import enable_heif
 
@@ -119,3 +119,56 @@ def test_alpha_is_kept_through_the_conversion():
     out = to_srgb(rgba, ImageCms.ImageCmsProfile(io.BytesIO(DISPLAY_P3)))
     assert out.shape == (8, 8, 4) and np.array_equal(out[..., 3], rgba[..., 3])
     assert out[0, 0, 0] > 200  # a P3 red of 200 is a more saturated red in sRGB
+
+
+def _heif_with_nclx(pixels: np.ndarray, primaries: int, transfer: int) -> bytes:
+    """A HEIC that states its colours as H.273 codes (an nclx box) and carries no ICC profile, as
+    Android phones' and Apple's own encoders write Display P3."""
+    assert enable_heif()
+    buffer = io.BytesIO()
+    Image.fromarray(pixels).save(buffer, "HEIF", quality=95, color_primaries=primaries, transfer_characteristics=transfer,
+                                 matrix_coefficients=6, full_range_flag=1)
+    return buffer.getvalue()
+
+
+def test_a_heic_that_names_display_p3_by_its_codes_becomes_the_srgb_picture(shared_data):
+    srgb = _fox(shared_data)
+    p3 = _as_p3(srgb)
+    data = _heif_with_nclx(p3, primaries=12, transfer=13)  # 12: P3 primaries with D65 white; 13: the sRGB curve
+    opened = Image.open(io.BytesIO(data))
+    assert "icc_profile" not in opened.info or not opened.info["icc_profile"]
+    space = nclx_space(opened)
+    assert space is not None and space.transfer == 13
+    # Display P3 -> sRGB, the published matrix (linear light).
+    np.testing.assert_allclose(space.rgb_to_srgb_matrix(), [[1.2249, -0.2249, 0.0], [-0.0421, 1.0421, 0.0], [-0.0196, -0.0786, 1.0983]],
+                               atol=5e-4)
+    decoded, _, _ = decode_image(data, max_side=1280)
+    baseline, _, _ = decode_image(_heif_with_nclx(srgb, primaries=1, transfer=13), max_side=1280)
+    error = np.abs(decoded.astype(float) - srgb).mean()
+    unconverted = np.abs(p3.astype(float) - srgb).mean()
+    # Read as sRGB it was the duller picture; converted, within what the codec costs an sRGB photo.
+    assert error < np.abs(baseline.astype(float) - srgb).mean() + 0.5 and error < unconverted / 2, (error, unconverted)
+
+
+def test_nclx_codes_that_are_srgb_hdr_or_unspecified_leave_the_pixels_as_stored(shared_data):
+    srgb = _fox(shared_data)
+    # 1: BT.709 = sRGB's primaries; 2: unspecified; P3 with PQ (16) is an HDR picture: tone mapping, not a
+    # change of primaries, so it is read as before.
+    for primaries, transfer in ((1, 13), (2, 2), (12, 16)):
+        opened = Image.open(io.BytesIO(_heif_with_nclx(srgb, primaries, transfer)))
+        assert nclx_space(opened) is None, (primaries, transfer)
+    # BT.2020 primaries with the BT.709 curve (read as sRGB's): converted, and more saturated than stored.
+    opened = Image.open(io.BytesIO(_heif_with_nclx(srgb, primaries=9, transfer=1)))
+    space = nclx_space(opened)
+    assert space is not None
+    grey_and_red = to_srgb(np.array([[[128, 128, 128], [180, 60, 40]]], np.uint8), space)
+    assert np.abs(grey_and_red[0, 0].astype(int) - 128).max() <= 1  # the same D65 white: greys stay grey
+    assert grey_and_red[0, 1, 0] > 180 and grey_and_red[0, 1, 1] < 60
+
+
+def test_a_damaged_nclx_description_leaves_the_pixels_as_stored():
+    image = Image.new("RGB", (4, 4))
+    for nclx in ({"color_primaries": 12, "transfer_characteristics": 13}, "not a dict",
+                 {"color_primaries": 12, "transfer_characteristics": 13, **{f"color_primary_{k}_{a}": 0.0 for k in ("red", "green", "blue", "white") for a in "xy"}}):
+        image.info["nclx_profile"] = nclx
+        assert nclx_space(image) is None
