@@ -77,3 +77,34 @@ def unread_type_reason(path: Path) -> str:
     if suffix in (".avif", ".jxl", ".gif", ".psd", ".exr", ".hdr"):
         return f"{suffix.lstrip('.').upper()} is not read here; save the photo as {FORMATS_IN_WORDS}"
     return f"not an image type we read ({FORMATS_IN_WORDS})"
+
+
+def folders_with_photos(root: Path, max_depth: int = 3, max_entries: int = 5000) -> list[tuple[Path, int]]:
+    """The folders below `root` (not `root` itself) that hold photos, with how many, nearest first:
+    what to name when a user points at a folder whose photos are in subfolders (a phone's DCIM/100APPLE,
+    an export by date). Hidden folders and links are not followed; at most `max_entries` entries are
+    looked at, so that pointing at a home folder cannot stall the message."""
+    found: list[tuple[Path, int]] = []
+    level, seen = [root], 0
+    for _ in range(max_depth):
+        below: list[Path] = []
+        for folder in level:
+            try:
+                entries = sorted(folder.iterdir())
+            except OSError:  # unreadable: nothing to name there
+                continue
+            seen += len(entries)
+            for entry in entries:
+                if entry.name.startswith(".") or entry.is_symlink() or not entry.is_dir():
+                    continue
+                try:
+                    count = sum(1 for p in entry.iterdir() if p.is_file() and is_photo(p))
+                except OSError:
+                    continue
+                if count:
+                    found.append((entry, count))
+                below.append(entry)
+            if seen > max_entries:
+                return found
+        level = below
+    return found

@@ -37,7 +37,7 @@ from .normalize import NormalizeConfig, estimate_normalization, is_floor
 from .pose_import import import_colmap_model, import_transforms_json
 from .records import PosingResult
 from .undistort import undistort_image
-from .photo_formats import FORMATS_IN_WORDS, VIDEO_SUFFIXES
+from .photo_formats import FORMATS_IN_WORDS, VIDEO_SUFFIXES, folders_with_photos
 from .video_frames import VideoConfig, select_video_frames
 
 STAGES = ("ingest", "pose", "normalize", "masks", "crops")
@@ -126,6 +126,15 @@ def _check_input_exists(inputs, out: Path) -> None:
 
 def _no_photos_message(inputs, reports) -> str:
     files = [r for r in reports if r.path.is_file()]
+    # Photos one level or more down (a phone's DCIM/100APPLE, an export by date) are not taken in
+    # silently: subfolders may hold other objects. They are named, so the user can point at one.
+    inside = folders_with_photos(Path(inputs)) if isinstance(inputs, (str, Path)) and Path(inputs).is_dir() else []
+    if inside:
+        named = ", ".join(f"{folder.relative_to(inputs)} ({count})" for folder, count in inside[:4])
+        more = f" and {len(inside) - 4} more" if len(inside) > 4 else ""
+        first = inside[0][0]
+        return (f"{inputs}: no photos directly in it; its subfolders hold photos: {named}{more}. A capture takes "
+                f"the photos of one folder (one object): point at the folder itself, for example {first}")
     if not files:
         return (f"{inputs}: no photos found (the folder holds no files); put the photos ({FORMATS_IN_WORDS}) "
                 f"directly in it, or name a video or camera:N")

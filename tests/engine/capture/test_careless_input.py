@@ -102,6 +102,25 @@ def test_a_failed_start_creates_nothing(tmp_path, capsys, source):
         assert "no photos found" in err and "overlap" not in err
 
 
+def test_photos_in_subfolders_are_named_and_nothing_is_created(tmp_path, shared_data, capsys):
+    """A phone's export (DCIM/100APPLE, or one folder a day): the photos are a level or two down. The
+    capture does not take in every subfolder (they may hold other objects); it names those that
+    hold photos, with how many, and the folder to point at."""
+    root = tmp_path / "phone"
+    _lego_photos(shared_data, root / "DCIM" / "100APPLE", 3)
+    _lego_photos(shared_data, root / "2026-12-06", 2)
+    (root / ".thumbnails").mkdir()
+    shutil.copy(shared_data / "synth_nerf_lego_train" / "train" / "r_0.png", root / ".thumbnails" / "r_0.png")
+    (root / "notes.txt").write_text("the red one")
+    before = _digest(root)
+    out = tmp_path / "X"
+    assert main(["capture", str(root), "-o", str(out)]) == 3
+    err = capsys.readouterr().err
+    assert "no photos directly in it; its subfolders hold photos: 2026-12-06 (2), DCIM/100APPLE (3)." in err, err
+    assert f"for example {root / '2026-12-06'}" in err and ".thumbnails" not in err
+    assert not out.exists() and _digest(root) == before
+
+
 def test_a_retry_after_a_failed_start_works(tmp_path, shared_data, capsys):
     out = tmp_path / "X"
     assert main(["capture", str(tmp_path / "nope"), "-o", str(out)]) == 3
