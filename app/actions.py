@@ -153,11 +153,21 @@ class AppActions:
                 self.open_capture(target)
                 if not nothing_new:
                     self._say_skipped([s for s in self.state.skipped_files if s not in before], inputs)
+                    self._say_exposure(target)
             elif job.state == "failed":
                 self.state.say(f"importing {inputs} failed: {job.error_text()}", "error")
             else:
                 self.state.say(f"importing {inputs} was cancelled; `lirm capture {target} --resume` finishes it")
         return self._start("capture", f"posing and masking {Path(inputs).name}", args, done)
+
+    def _say_exposure(self, capture_dir: Path) -> None:
+        """After an import: a warning when the photos' EXIF says the camera's exposure moved between
+        them (exif_exposure.py), as the capture report says it."""
+        from lirm.engine.capture.exif_exposure import exposure_note
+
+        note = exposure_note([r.exposure_stops for r in Capture.open(capture_dir).records])
+        if note and note[1]:
+            self.state.say(f"exposure: {note[0]}", "warning")
 
     def _say_skipped(self, skipped: list[tuple[str, str]], inputs: str) -> None:
         """After an import: which files it did not take, and why (the Capture panel lists them all)."""

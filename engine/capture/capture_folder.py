@@ -226,6 +226,7 @@ class Capture:
                 frame_id=f["frame_id"], original=Path(f["original"]), image=Path(f["image"]), width=f["width"],
                 height=f["height"], sha256=f["sha256"], has_alpha=f.get("has_alpha", False), origin=f.get("origin", "photo"),
                 timestamp_s=f.get("timestamp_s"), focal_prior_px=f.get("focal_prior_px"),
+                exposure_stops=f.get("exposure_stops"),
             )
             pinhole = f.get("pinhole_image")
             capture.frames[record.frame_id] = FrameState(record, f.get("pose_status", "not posed"), f.get("mask_status", "no mask"),

@@ -39,6 +39,7 @@ from lirm.engine.io.atomic_files import atomic_write_bytes
 from lirm.engine.io.images import write_png
 
 from .colour_profiles import source_colour_space, to_srgb
+from .exif_exposure import exposure_stops_of_file
 from .exif_focal import focal_prior_pixels
 from .photo_formats import FORMATS_IN_WORDS, HEIF_SUFFIXES, companion_reason, enable_heif, is_photo, photo_stems, unread_type_reason
 from .records import FileReport, ImageRecord
@@ -346,7 +347,8 @@ def _check_and_add(path, capture_root, config, ids, by_hash, thumbs, used_origin
         raise LirmUserError(f"{capture_root}: cannot write into the capture folder ({err}); "
                             "check free disk space and permissions") from err
     record = ImageRecord(frame_id=frame_id, original=original, image=image_path, width=rgb.shape[1], height=rgb.shape[0],
-                         sha256=sha, has_alpha=rgb.shape[2] == 4, origin="photo", focal_prior_px=focal_prior)
+                         sha256=sha, has_alpha=rgb.shape[2] == 4, origin="photo", focal_prior_px=focal_prior,
+                         exposure_stops=exposure_stops_of_file(data))
     records.append(record)
     by_hash[sha] = describe(record)
     thumbs.add(thumb, describe(record))

@@ -40,6 +40,7 @@ class ImageRecord:
     origin: str = "photo"  # photo | video | camera
     timestamp_s: float | None = None  # for video and camera frames
     focal_prior_px: float | None = None  # the lens's focal length from EXIF, in working-copy pixels (exif_focal.py)
+    exposure_stops: float | None = None  # log2(time x ISO / 100 / f-number^2) from EXIF (exif_exposure.py)
 
 
 @dataclass

@@ -24,6 +24,9 @@ def format_capture_report(summary: CaptureSummary, reference: Path | None = None
     lens_line = _lens_line(capture.records)
     if lens_line:
         lines.append(lens_line)
+    exposure_line = _exposure_line(capture.records)
+    if exposure_line:
+        lines.append(exposure_line)
     focal_note = _focal_check_of_last_pose(capture.history)
     if focal_note:  # COLMAP's model disagreed with the lens (focal_check.py)
         lines.append(f"  focal length: {focal_note}")
@@ -83,6 +86,15 @@ def _lens_line(records) -> str | None:
     shown = ", ".join(f"{round(float(np.median(lens)))} px" for lens in lenses)
     return (f"  focal length from EXIF: {len(focals)} of {len(records)} photos, {len(lenses)} "
             f"lens{'es' if len(lenses) > 1 else ''} ({shown} in the working images)")
+
+
+def _exposure_line(records) -> str | None:
+    """How far apart the photos' exposures were (exif_exposure.py), with the fix when the camera's
+    automatic exposure moved enough to show as the object's brightness."""
+    from .exif_exposure import exposure_note
+
+    note = exposure_note([r.exposure_stops for r in records])
+    return f"  exposure from EXIF: {note[0]}" if note else None
 
 
 def _focal_check_of_last_pose(history: list[dict]) -> str | None:

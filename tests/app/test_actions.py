@@ -105,3 +105,27 @@ def test_the_real_height_set_in_the_app_reaches_the_capture(app, lego_capture, t
     app.jobs.wait()
     assert json.loads((capture / "capture.json").read_text())["settings"]["real_size"] == {"height": 0.12}
     assert app.state.real_size == {"height": 0.12}
+
+
+def test_an_import_whose_photos_were_exposed_apart_warns_with_the_fix(app, shared_data, tmp_path):
+    """A phone's automatic exposure moved between shots (EXIF: 1/50 s against 1/200 s): after the
+    import the app says so and how to avoid it, as `lirm capture`'s report does."""
+    from PIL import Image
+    from PIL.TiffImagePlugin import IFDRational
+
+    from lirm.engine.cli import main
+
+    lego = shared_data / "synth_nerf_lego_train"
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for k, denominator in enumerate((100, 50, 200, 100)):
+        exif = Image.new("RGB", (1, 1)).getexif()
+        exif.get_ifd(0x8769).update({0x829A: IFDRational(1, denominator), 0x829D: IFDRational(18, 10), 0x8827: 100})
+        Image.open(lego / "train" / f"r_{5 * k}.png").save(photos / f"r_{5 * k}.png", exif=exif.tobytes())
+    capture = tmp_path / "capture"
+    assert main(["capture", str(photos), "-o", str(capture), "--masks", "alpha", "--size", "32",
+                 "--poses", str(lego / "transforms_train.json")]) == 0
+    app._say_exposure(capture)
+    last = app.state.messages[-1]
+    assert last.level == "warning" and last.text.startswith("exposure: 4 of 4 photos, 2.0 EV between"), last.text
+    assert "lock the exposure" in last.text
