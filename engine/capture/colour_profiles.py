@@ -22,10 +22,9 @@ change of primaries, and an sRGB reading of it is what the photo looked like bef
 from __future__ import annotations
 
 import io
-
-import numpy as np
 from dataclasses import dataclass
 
+import numpy as np
 from PIL import Image, ImageCms
 
 _SRGB = None

@@ -23,7 +23,8 @@ from typing import Sequence
 
 from PIL import Image
 
-EXIF_IFD = 0x8769
+from .exif_focal import EXIF_IFD
+
 EXPOSURE_TIME = 0x829A
 F_NUMBER = 0x829D
 ISO_SPEED = 0x8827  # PhotographicSensitivity (ISOSpeedRatings before EXIF 2.3); a number or a tuple

@@ -83,10 +83,10 @@ def folders_with_photos(root: Path, max_depth: int = 3, max_entries: int = 5000)
     """The folders below `root` (not `root` itself) that hold photos, with how many, nearest first:
     what to name when a user points at a folder whose photos are in subfolders (a phone's DCIM/100APPLE,
     an export by date). Hidden folders and links are not followed; at most `max_entries` entries are
-    looked at, so that pointing at a home folder cannot stall the message."""
+    looked at, so that pointing at a home folder cannot stall the message. Each folder is listed once."""
     found: list[tuple[Path, int]] = []
     level, seen = [root], 0
-    for _ in range(max_depth):
+    for depth in range(max_depth + 1):  # depth 0 is `root` itself, listed only for its subfolders
         below: list[Path] = []
         for folder in level:
             try:
@@ -94,16 +94,10 @@ def folders_with_photos(root: Path, max_depth: int = 3, max_entries: int = 5000)
             except OSError:  # unreadable: nothing to name there
                 continue
             seen += len(entries)
-            for entry in entries:
-                if entry.name.startswith(".") or entry.is_symlink() or not entry.is_dir():
-                    continue
-                try:
-                    count = sum(1 for p in entry.iterdir() if p.is_file() and is_photo(p))
-                except OSError:
-                    continue
-                if count:
-                    found.append((entry, count))
-                below.append(entry)
+            count = sum(1 for p in entries if is_photo(p) and p.is_file())
+            if depth > 0 and count:
+                found.append((folder, count))
+            below.extend(e for e in entries if not e.name.startswith(".") and not e.is_symlink() and e.is_dir())
             if seen > max_entries:
                 return found
         level = below
