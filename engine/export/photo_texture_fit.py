@@ -37,6 +37,7 @@ import numpy as np
 import torch
 
 from lirm.engine.lighting.camera_response import radiance_to_display_torch
+from lirm.engine.lighting.footprint_shading import shade_footprints
 from lirm.engine.lighting.tabulated_lighting import TabulatedLighting
 
 from .fit_resolution import averaged_down, carried_up, fit_size_for, texels_per_photo_pixel
@@ -77,6 +78,11 @@ class TextureFitConfig:
     # 2 relit the synthetic set 0.14 dB and the glTF pair 0.12 dB better than 1 (every object), 3 only
     # 0.02 dB more than 2; the fit takes about 3 times as long (README, "The pixel footprint").
     footprint: int = 2
+    # True: a pixel's sub-samples are pooled before shading, their texture reads and their lighting's
+    # tabulated terms averaged and shaded once (a box-filtered read), instead of shaded each and their
+    # radiance averaged. The same texels pulled, a quarter of the shading's work at a footprint of 2;
+    # it differs from the exact mean only where a pixel's material and its light both vary inside it.
+    pooled_footprint: bool = False
     seed: int = 0
     dilation: int = 16  # as the bake: texels grown into the gutters
     # Each texel's material chosen among three fits before the joint one (metal_search.py): the field's
@@ -313,6 +319,10 @@ class _Shading:
         self.samples = samples
         self.light = tabulated if tabulated is not None else TabulatedLighting(lighting, samples.normal, samples.view,
                                                                                config.lighting_levels)
+        # pooled: each pixel's sub-samples read and lit as one (TextureFitConfig.pooled_footprint)
+        self.pool = samples.footprint if config.pooled_footprint else 1
+        if self.pool > 1 and self.light.count == samples.uv.shape[0]:
+            self.light = self.light.pooled(self.pool)
         self.reads: TexelReads | None = None  # made at the first step, when the textures' size is known
         self.clip_level = config.clip_level
         self.camera_response = lighting.camera_response  # the photos' tone curve, as the refinement had it
@@ -334,13 +344,12 @@ class _Shading:
         clipped = self.clipped if colour is None else self._clipped(colour)
         colour = self.colour if colour is None else colour
         if self.reads is None or self.reads.size != albedo_logit.shape[0]:
-            self.reads = TexelReads(samples.uv, albedo_logit.shape[0])
+            self.reads = TexelReads(samples.uv, albedo_logit.shape[0], self.pool)
         # all five channels in one read: albedo (3), roughness, metallic
         texels = torch.sigmoid(torch.cat([albedo_logit, roughness_logit, metallic_logit], -1))
         read = self.reads(texels)
-        shaded = self.light.shade(read[:, :3], read[:, 3], read[:, 4]).radiance
-        if samples.footprint > 1:  # the pixel integrates its footprint in linear light
-            shaded = shaded.reshape(-1, samples.footprint, 3).mean(1)
+        # the pixel integrates its footprint in linear light (tabulated_lighting.shade's model, by hand)
+        shaded = shade_footprints(self.light, read, samples.footprint // self.pool)
         predicted = radiance_to_display_torch(shaded, self.camera_response)
         difference = predicted - colour
         if clipped is not None:  # (the tone curve never reaches 1: a clipped value is compared with the level)
@@ -443,7 +452,7 @@ def fit_textures(textures: BakedTextures, samples: PixelSamples, lighting, confi
         done = steps
     if searching and not stopped:
         search_shading = shading
-        if config.search_one_sample and samples.footprint > 1:
+        if config.search_one_sample and samples.footprint > 1 and not config.pooled_footprint:
             search_shading = _Shading(samples.one_sample(), lighting, config,
                                       shading.light.rows(slice(None, None, samples.footprint)))
             search_shading.use_colour(shading.colour)  # (the registered colours, when registered)

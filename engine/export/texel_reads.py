@@ -23,11 +23,15 @@ import torch
 class TexelReads:
     """Reads of an `size` x `size` texture at (N, 2) texture coordinates `uv`."""
 
-    def __init__(self, uv: torch.Tensor, size: int):
+    def __init__(self, uv: torch.Tensor, size: int, pooled: int = 1):
+        """`pooled` > 1: each run of that many consecutive coordinates is one read, their mean (a photo
+        pixel's footprint read as one box-filtered sample)."""
         if size < 1:
             raise ValueError(f"a texture needs at least one texel, got size {size}")
+        if pooled < 1 or uv.shape[0] % pooled:
+            raise ValueError(f"{uv.shape[0]} coordinates do not make whole runs of {pooled}")
         self.size = int(size)
-        self.count = int(uv.shape[0])
+        self.count = int(uv.shape[0]) // pooled
         # grid_sample's unnormalised coordinates (align_corners=False), clamped to the border texels
         x = (uv[:, 0].double() * size - 0.5).clamp(0.0, size - 1.0)
         y = (uv[:, 1].double() * size - 0.5).clamp(0.0, size - 1.0)
@@ -36,8 +40,8 @@ class TexelReads:
         x0, y0 = x0.long(), y0.long()
         x1, y1 = (x0 + 1).clamp(max=size - 1), (y0 + 1).clamp(max=size - 1)
         texels = torch.stack([y0 * size + x0, y0 * size + x1, y1 * size + x0, y1 * size + x1], 1).reshape(-1)
-        weights = torch.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], 1).reshape(-1).float()
-        reads = torch.arange(self.count).repeat_interleave(4)
+        weights = torch.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], 1).reshape(-1).float() / pooled
+        reads = torch.arange(self.count).repeat_interleave(4 * pooled)  # (coalescing sums a run's shared texels)
         shape = (self.count, size * size)
         with warnings.catch_warnings():  # torch calls its compressed-row tensors beta; these two use only the product
             warnings.simplefilter("ignore", UserWarning)

@@ -111,6 +111,18 @@ class TabulatedLighting:
         part.count = part.irradiance.shape[0]
         return part
 
+    def pooled(self, group: int) -> "TabulatedLighting":
+        """Each run of `group` consecutive pixels as one: the mean of their terms (a photo pixel's
+        footprint shaded once, as the texture fit's "pooled" footprint does)."""
+        if group < 1 or self.count % group:
+            raise ValueError(f"{self.count} pixels do not make whole runs of {group}")
+        part = object.__new__(TabulatedLighting)
+        part.lighting, part.levels, part.count = self.lighting, self.levels, self.count // group
+        mean = lambda t: t.reshape(part.count, group, *t.shape[1:]).mean(1)  # noqa: E731
+        part.irradiance, part.specular, part.brdf_rows = mean(self.irradiance), mean(self.specular), mean(self.brdf_rows)
+        part.n_dot_v, part.fresnel = mean(self.n_dot_v), mean(self.fresnel)
+        return part
+
     def _check(self, rows: int) -> None:
         if rows != self.count:
             raise ValueError(f"this lighting was tabulated for {self.count} pixels, not {rows}")

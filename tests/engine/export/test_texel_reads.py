@@ -35,3 +35,18 @@ def test_a_texture_of_another_size_is_refused():
     reads = TexelReads(torch.rand(10, 2), 8)
     with pytest.raises(ValueError, match="8 x 8 texture, not"):
         reads(torch.rand(16, 16, 3))
+
+
+def test_pooled_reads_are_the_means_of_each_run_with_their_gradients():
+    g = torch.Generator().manual_seed(3)
+    uv, texture = torch.rand(40, 2, generator=g), torch.rand(9, 9, 5, generator=g)
+    weights = torch.rand(10, 5, generator=g)
+    ours, theirs = texture.clone().requires_grad_(True), texture.clone().requires_grad_(True)
+    pooled = TexelReads(uv, 9, pooled=4)(ours)
+    expected = TexelReads(uv, 9)(theirs).reshape(10, 4, 5).mean(1)
+    torch.testing.assert_close(pooled, expected)
+    (pooled * weights).sum().backward()
+    (expected * weights).sum().backward()
+    torch.testing.assert_close(ours.grad, theirs.grad)
+    with pytest.raises(ValueError, match="whole runs of 3"):
+        TexelReads(uv, 9, pooled=3)

@@ -100,3 +100,20 @@ def test_its_own_shading_is_shade_and_its_brdf_the_lighting_table_read_exactly()
         torch.testing.assert_close(ours.grad, theirs.grad, atol=1e-5, rtol=1e-4)
     part = table.rows(slice(None, None, 3))
     torch.testing.assert_close(part.shade(albedo[::3], roughness[::3], metallic[::3]).radiance, fast[::3].detach())
+
+
+def test_pooled_terms_are_the_means_of_each_run_and_shade_a_uniform_run_as_its_members():
+    panorama = PanoramaLighting.from_environment(make_procedural_environment("studio", width=64), height=8)
+    normals, views = _pixels(12, seed=5)
+    table = TabulatedLighting(panorama, normals, views)
+    pooled = table.pooled(4)
+    assert pooled.count == 3
+    torch.testing.assert_close(pooled.specular[1], table.specular[4:8].mean(0))
+    torch.testing.assert_close(pooled.brdf_rows[2], table.brdf_rows[8:12].mean(0))
+    # four copies of one pixel pool to that pixel
+    same = TabulatedLighting(panorama, normals[:1].repeat(4, 1), views[:1].repeat(4, 1)).pooled(4)
+    materials = (torch.tensor([[0.6, 0.3, 0.2]]), torch.tensor([0.4]), torch.tensor([0.3]))
+    with torch.no_grad():
+        torch.testing.assert_close(same.shade(*materials).radiance, table.rows(slice(0, 1)).shade(*materials).radiance)
+    with pytest.raises(ValueError, match="whole runs of 5"):
+        table.pooled(5)
