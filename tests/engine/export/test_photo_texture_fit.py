@@ -118,16 +118,21 @@ def test_the_metal_search_finds_metal_that_the_field_left_as_paint():
         searched.metallic[left].mean(), searched.metallic[right].mean())
     assert 0.35 < report.metal_share < 0.65 and "metal search" in report.summary()
     assert report.loss_after < 0.7 * plain_report.loss_after, (report.loss_after, plain_report.loss_after)
-    # With a footprint, the search may shade one sub-sample of each pixel (search_one_sample): here every
-    # pixel's four sub-samples are alike, so it chooses as the search over all of them does.
+    # With a footprint shaded per sub-sample, the search may shade one sub-sample of each pixel
+    # (search_one_sample); pooled (the default), every fit shades each pixel once, its sub-samples'
+    # reads and light averaged. Here every pixel's four sub-samples are alike, so all three choose
+    # and fit as the search over all of them does.
     repeat = lambda t: t.repeat_interleave(4, 0)  # noqa: E731
     footprint = PixelSamples(repeat(uv), repeat(normal), repeat(view), colour, footprint=4).subset(4000)
-    short = TextureFitConfig(search_steps=60, search_final_steps=60, register_heights=0)
+    short = TextureFitConfig(search_steps=60, search_final_steps=60, register_heights=0, pooled_footprint=False)
     with torch.no_grad():
         full, full_report = fit_textures(start, footprint, lighting, replace(short, search_one_sample=False))
         one, one_report = fit_textures(start, footprint, lighting, replace(short, search_one_sample=True))
-    assert one_report.metal_share == pytest.approx(full_report.metal_share, abs=0.01) and one_report.metal_share > 0.3
-    np.testing.assert_allclose(one.metallic, full.metallic, atol=0.02)  # (float rounding, through Adam)
+        pooled, pooled_report = fit_textures(start, footprint, lighting, replace(short, pooled_footprint=True))
+    for report, fitted in ((one_report, one), (pooled_report, pooled)):
+        assert report.metal_share == pytest.approx(full_report.metal_share, abs=0.01) and report.metal_share > 0.3
+        np.testing.assert_allclose(fitted.metallic, full.metallic, atol=0.02)  # (float rounding, through Adam)
+    np.testing.assert_allclose(pooled.base_color, full.base_color, atol=0.02)
 
 
 def checker_sphere_photos(tmp_path, gl_context, renderer):
