@@ -9,10 +9,9 @@ value for a given radiance scales with exposure time x ISO / f-number^2, so
 
     stops = log2(exposure time [s] x ISO / 100 / f-number^2)
 
-differs between two photos by the exposure difference in stops (EV). The capture report gives the
-spread and, above `WARN_SPREAD_STOPS`, says to lock the exposure. The photos themselves are not
-brightened or darkened here: the working copies are display-referred (a tone curve the camera chose),
-so a correction belongs in the reconstruction's linear terms, which do not yet model it.
+differs between two photos by the exposure difference in stops (EV). exposure_match.py brings the
+working copies to one exposure by it; the capture report gives the spread and, above
+`WARN_SPREAD_STOPS`, says to lock the exposure (what the matching cannot undo is named there).
 """
 
 from __future__ import annotations
@@ -24,6 +23,7 @@ from typing import Sequence
 from PIL import Image
 
 from .exif_focal import EXIF_IFD
+from .exposure_match import SAME_EXPOSURE_STOPS
 
 EXPOSURE_TIME = 0x829A
 F_NUMBER = 0x829D
@@ -86,7 +86,15 @@ def exposure_note(stops: Sequence[float | None]) -> tuple[str, bool] | None:
     text = f"{count} of {len(stops)} photos, {stops_apart:.1f} EV between the brightest and darkest exposed"
     warn = stops_apart > WARN_SPREAD_STOPS
     if warn:
-        text += (f" (the camera's automatic exposure: {2 ** stops_apart:.1f} x in brightness); the reconstruction reads "
-                 "every photo as one exposure, so the difference becomes the object's or the light's: lock the exposure "
+        text += f" (the camera's automatic exposure: {2 ** stops_apart:.1f} x in brightness)"
+    if stops_apart <= SAME_EXPOSURE_STOPS:
+        return text, warn
+    if count < len(stops):  # exposure_match.exposure_gains: a photo of unknown exposure has no place to be matched to
+        text += (f"; not matched to one exposure: {len(stops) - count} photo{'s say' if len(stops) - count > 1 else ' says'} "
+                 "nothing of its exposure, so the difference becomes the object's or the light's")
+    else:
+        text += "; the working copies are matched to the most exposed photo (the others brightened in linear light)"
+    if warn:
+        text += (", which leaves a phone's own tone mapping and the highlights the brightening clips: lock the exposure "
                  "when shooting (on a phone, press and hold on the object to lock AE/AF) or use manual exposure")
     return text, warn

@@ -26,6 +26,7 @@ from .capture_folder import Capture, FrameState
 from .colmap_posing import ColmapConfig, extend_colmap_pose, map_again_without, pose_with_colmap
 from .focal_check import pose_again_if_focal_is_off
 from .crop import CropConfig, EmptyMaskError, prepare_view
+from .exposure_match import capture_exposure_gains, capture_response, exposure_matched_image, match_exposure
 from ..lighting.camera_response import RESPONSES, response_for_capture
 from ..lighting.capture_lighting import CaptureLightingConfig, estimate_capture_lighting
 from .disk_space import require_free_space, stage_bytes
@@ -243,8 +244,9 @@ def _finish(capture: Capture, config: CaptureConfig, progress, cancel, new_frame
         return _summary(capture)
     for stage, run in (("normalize", lambda: _normalize(capture, config)),
                        ("masks", lambda: _masks(capture, config, progress, cancel)),
-                       ("crops", lambda: _crops(capture, config, progress, cancel)),
-                       ("lighting", lambda: _lighting(capture, config, cancel))):
+                       # the lighting first: it decides the camera curve the crops are exposure-matched through
+                       ("lighting", lambda: _lighting(capture, config, cancel)),
+                       ("crops", lambda: _crops(capture, config, progress, cancel))):
         if stage not in capture.settings.get("completed", []) or new_frames:
             _timed(capture, config, stage, run)
     return _summary(capture)
@@ -572,6 +574,7 @@ def _fit_world_to_masks(capture: Capture, config: CaptureConfig, masks: dict[str
 def _crops(capture: Capture, config: CaptureConfig, progress, cancel) -> None:
     posed = sorted(capture.cameras)
     done = 0
+    gains, response = capture_exposure_gains(capture), capture_response(capture)  # one exposure (exposure_match.py)
     for f in posed:
         if _cancelled(cancel):
             raise Cancelled("cancelled while cropping")
@@ -580,7 +583,8 @@ def _crops(capture: Capture, config: CaptureConfig, progress, cancel) -> None:
         if mask is None or state.mask_status != "ok":
             continue
         try:
-            view = prepare_view(f, capture.read_image(f)[:, :, :3], mask, capture.cameras[f], config.crop)
+            view = prepare_view(f, exposure_matched_image(capture, f, gains, response)[:, :, :3], mask, capture.cameras[f],
+                                config.crop)
         except EmptyMaskError:
             state.mask_status = "empty"
             continue
@@ -588,7 +592,8 @@ def _crops(capture: Capture, config: CaptureConfig, progress, cancel) -> None:
         done += 1
         if progress:
             progress("crops", done, len(posed))
-    capture.log("crops", prepared=done, size=config.crop.size)
+    matched = {"exposure_matched": True, "brightened_up_to_stops": round(float(np.log2(max(gains.values()))), 2)} if gains else {}
+    capture.log("crops", prepared=done, size=config.crop.size, **matched)
     capture.save()
 
 
@@ -602,10 +607,12 @@ def _lighting(capture: Capture, config: CaptureConfig, cancel) -> None:
         if mask is not None:
             images[f], masks[f] = capture.read_image(f), mask
     plane = capture.normalization.plane if capture.normalization is not None else None
+    gains = capture_exposure_gains(capture)  # the photos at one exposure (exposure_match.py), through the curve tried
 
     def estimate(response: str):
+        matched = {f: match_exposure(image, gains[f], response) for f, image in images.items()} if gains else images
         try:
-            return estimate_capture_lighting(images, masks, capture.cameras, replace(config.lighting, response=response),
+            return estimate_capture_lighting(matched, masks, capture.cameras, replace(config.lighting, response=response),
                                              cancel=cancel, support_plane=plane)
         except InterruptedError as error:
             raise Cancelled(str(error)) from error

@@ -31,6 +31,14 @@ def display_to_radiance(display: np.ndarray, response: str = "aces") -> np.ndarr
     return display_to_radiance_torch(torch.from_numpy(np.asarray(display, np.float64)), response).numpy()
 
 
+def radiance_to_display(radiance: np.ndarray, response: str = "aces") -> np.ndarray:
+    """(..., 3) linear scene radiance -> display sRGB in [0, 1], in float64 (`radiance_to_display_torch`
+    on numpy arrays)."""
+    import torch
+
+    return radiance_to_display_torch(torch.from_numpy(np.asarray(radiance, np.float64)), response).numpy()
+
+
 def display_to_radiance_torch(display, response: str = "aces"):
     """(..., 3) display sRGB in [0, 1] -> linear scene radiance (exposure 0); the one implementation
     (`display_to_radiance` is it on numpy arrays). No gradient is needed through it: it makes targets."""

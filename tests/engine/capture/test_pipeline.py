@@ -170,20 +170,21 @@ def test_an_interrupted_capture_resumes(tmp_path, shared_data):
     config = CaptureConfig(masks="alpha", poses=str(lego / "transforms_train.json"))
     calls = {"n": 0}
 
-    def cancel_during_crops() -> bool:
+    def cancel_after_masks() -> bool:
         calls["n"] += 1
         return Capture.open(tmp_path / "capture").settings.get("completed", [])[-1:] == ["masks"]
 
     from lirm.engine.capture.ingest import Cancelled
 
     with pytest.raises(Cancelled):
-        run_capture(folder, tmp_path / "capture", config, cancel=cancel_during_crops)
+        run_capture(folder, tmp_path / "capture", config, cancel=cancel_after_masks)
     reopened = Capture.open(tmp_path / "capture")
     assert "masks" in reopened.settings["completed"] and "crops" not in reopened.settings["completed"]
     assert main(["capture", "--resume", str(tmp_path / "capture"), "--masks", "alpha",
                  "--poses", str(lego / "transforms_train.json")]) == 0
     assert len(list((tmp_path / "capture" / "prepared").glob("*.npz"))) == 6
-    assert Capture.open(tmp_path / "capture").settings["completed"][-2:] == ["crops", "lighting"]
+    # the lighting before the crops: it decides the camera curve the crops are exposure-matched through
+    assert Capture.open(tmp_path / "capture").settings["completed"][-2:] == ["lighting", "crops"]
 
 
 @pytest.mark.slow
