@@ -84,7 +84,8 @@ class TextureFitConfig:
     # it differs from the exact mean only where a pixel's material and its light both vary inside it.
     # Paired on the same refined fields (synthetic objects 0-3): relight PSNR-L / PSNR-H 24.81 / 28.94
     # shading each sub-sample, 24.88 / 28.90 pooled (PSNR-L as good or better on every object), the
-    # fit 19.7 s -> 12.7 s an object; the demo capture's fit 127.5 s -> 84.4 s (README, "The pooled
+    # fit 19.7 s -> 12.7 s an object; on the glTF pair 23.71 / 27.61 -> 23.57 / 27.56 (the WaterBottle's
+    # metal -0.24), 17.0 -> 14.1 s; the demo capture's fit 127.5 s -> 84.4 s (README, "The pooled
     # footprint"). The metal search then shades the pooled pixels too (search_one_sample is moot).
     pooled_footprint: bool = True
     seed: int = 0
