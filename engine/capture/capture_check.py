@@ -22,7 +22,7 @@ import numpy as np
 
 from .capture_folder import Capture
 from .crop import CropConfig, EmptyMaskError, prepare_view
-from .exposure_match import capture_exposure_gains, exposure_matched_image
+from .exposure_match import capture_exposure_gains, capture_response, exposure_matched_image
 from .masks import load_user_masks, mask_from_alpha
 
 
@@ -71,7 +71,7 @@ def check_capture(root: str | Path, repair: bool = True) -> CheckReport:
                                                f"mask again with `lirm capture --fix-mask {f} MASK.png {capture.root}`")
 
     if "crops" in completed:
-        gains = capture_exposure_gains(capture)  # cut as the capture cut them: at one exposure
+        gains, response = capture_exposure_gains(capture), capture_response(capture)  # cut as the capture cut them: at one exposure
         for f in posed:
             if capture.frames[f].mask_status != "ok" or f in unreadable_images:
                 continue
@@ -81,7 +81,7 @@ def check_capture(root: str | Path, repair: bool = True) -> CheckReport:
                 report.unrepairable.append(f"{f}: prepared crop missing or damaged")
                 continue
             try:
-                capture.write_prepared(prepare_view(f, exposure_matched_image(capture, f, gains)[:, :, :3], capture.read_mask(f),
+                capture.write_prepared(prepare_view(f, exposure_matched_image(capture, f, gains, response)[:, :, :3], capture.read_mask(f),
                                                    capture.cameras[f], crop))
                 report.repaired.append(f"{f}: prepared crop cut again")
             except EmptyMaskError:

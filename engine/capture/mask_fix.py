@@ -24,7 +24,7 @@ from lirm.engine.io.atomic_files import atomic_write_json
 
 from .capture_folder import Capture
 from .crop import CropConfig, prepare_view
-from .exposure_match import capture_exposure_gains, exposure_matched_image
+from .exposure_match import capture_exposure_gains, capture_response, exposure_matched_image
 from .masks import check_mask, propagate_mask_fix
 
 MIN_CORRECTION_FRACTION = 0.002  # of the image: below this a "corrected" mask has no object in it
@@ -128,10 +128,10 @@ def _back_up(capture: Capture, frames: list[str], what: dict) -> Path:
 
 def _recrop(capture: Capture, frames: list[str], crop: CropConfig) -> None:
     """Prepared crops follow the masks: re-cut where the mask is usable, removed where it is not."""
-    gains = capture_exposure_gains(capture)  # at one exposure, as the capture cut them (exposure_match.py)
+    gains, response = capture_exposure_gains(capture), capture_response(capture)  # at one exposure, as cut
     for f in frames:
         mask = capture.read_mask(f)
         if mask is not None and capture.frames[f].mask_status == "ok":
-            capture.write_prepared(prepare_view(f, exposure_matched_image(capture, f, gains)[:, :, :3], mask, capture.cameras[f], crop))
+            capture.write_prepared(prepare_view(f, exposure_matched_image(capture, f, gains, response)[:, :, :3], mask, capture.cameras[f], crop))
         else:
             capture.prepared_path(f).unlink(missing_ok=True)

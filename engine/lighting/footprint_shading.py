@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import torch
 
-from .tabulated_lighting import BRDF_ROWS, TabulatedLighting
+from .tabulated_lighting import BRDF_ROWS, TabulatedLighting, linear_row_read
 
 # Schlick's average Fresnel over the hemisphere, f0 + (1 - f0) / 21, as mix_split_sum has it
 _F_AVG_SLOPE, _F_AVG_OFFSET = 20.0 / 21.0, 1.0 / 21.0
@@ -36,30 +36,12 @@ def shade_footprints(lighting: TabulatedLighting, reads: torch.Tensor, footprint
     return _FootprintShading.apply(reads, lighting, footprint)
 
 
-def _linear_read(table: torch.Tensor, position: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Each sample's (M, R, C) rows read linearly at its fractional row `position` (M, 1), clamped to
-    the first and last rows, and the read's slope in `position` (zero where clamped): one gather of
-    both neighbouring rows, through a view of the table whose row i holds rows i and i + 1."""
-    samples, rows, channels = table.shape
-    x = position.clamp(0.0, rows - 1.0)
-    below = x.floor().long().clamp(max=rows - 2)
-    flat = table.reshape(-1)
-    pairs = flat.as_strided((flat.numel() // channels - 1, 2 * channels), (channels, 1))
-    first = torch.arange(samples, device=table.device) * rows + below[:, 0]
-    both = pairs.index_select(0, first)
-    low, high = both[:, :channels], both[:, channels:]
-    step = high - low
-    value = torch.addcmul(low, step, x - below.to(x.dtype))
-    inside = (position >= 0.0) & (position <= rows - 1.0)  # torch's clamp passes the gradient at its bounds
-    return value, step * inside
-
-
 class _FootprintShading(torch.autograd.Function):
     @staticmethod
     def forward(ctx, reads: torch.Tensor, lighting: TabulatedLighting, footprint: int) -> torch.Tensor:
         albedo, roughness, metallic = reads[:, :3], reads[:, 3:4], reads[:, 4:5]
-        ab, ab_slope = _linear_read(lighting.brdf_rows, roughness * BRDF_ROWS - 0.5)
-        specular_light, specular_slope = _linear_read(lighting.specular, roughness * (lighting.levels - 1))
+        ab, ab_slope = linear_row_read(lighting.brdf_rows, roughness * BRDF_ROWS - 0.5)
+        specular_light, specular_slope = linear_row_read(lighting.specular, roughness * (lighting.levels - 1))
         a, b = ab[:, :1], ab[:, 1:]
         irradiance, fresnel = lighting.irradiance, lighting.fresnel
         f0 = torch.addcmul(torch.full_like(albedo, _DIELECTRIC_F0), metallic, albedo - _DIELECTRIC_F0)

@@ -153,11 +153,23 @@ class TabulatedLighting:
 
 def _between_rows(table: torch.Tensor, position: torch.Tensor) -> torch.Tensor:
     """(N, C): each pixel's (N, R, C) rows read linearly at its fractional row `position` (N,), clamped
-    to the first and last rows (GL_LINEAR's clamp-to-edge). Differentiable in `position` only."""
-    rows = table.shape[1]
+    to the first and last rows (GL_LINEAR's clamp-to-edge); differentiable by autograd."""
+    return linear_row_read(table, position[:, None])[0]
+
+
+def linear_row_read(table: torch.Tensor, position: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Each sample's (M, R, C) rows read linearly at its fractional row `position` (M, 1), clamped to
+    the first and last rows, and the read's slope in `position` (zero where clamped): one gather of
+    both neighbouring rows, through a view of the table whose row i holds rows i and i + 1."""
+    samples, rows, channels = table.shape
     x = position.clamp(0.0, rows - 1.0)
-    below = x.detach().floor().long().clamp(max=rows - 2)
-    t = (x - below.to(x.dtype))[:, None]
-    flat = table.reshape(-1, table.shape[2])
-    first = torch.arange(table.shape[0], device=x.device) * rows + below
-    return flat.index_select(0, first) * (1.0 - t) + flat.index_select(0, first + 1) * t
+    below = x.floor().long().clamp(max=rows - 2)
+    flat = table.reshape(-1)
+    pairs = flat.as_strided((flat.numel() // channels - 1, 2 * channels), (channels, 1))
+    first = torch.arange(samples, device=table.device) * rows + below[:, 0]
+    both = pairs.index_select(0, first)
+    low, high = both[:, :channels], both[:, channels:]
+    step = high - low
+    value = torch.addcmul(low, step, x - below.to(x.dtype))
+    inside = (position >= 0.0) & (position <= rows - 1.0)  # torch's clamp passes the gradient at its bounds
+    return value, step * inside
