@@ -19,7 +19,7 @@ demo: setup
 	@if [ -n "$$DISPLAY$$WAYLAND_DISPLAY" ]; then $(BIN)/lirm app --demo; else $(BIN)/lirm demo -o $(DEMO_DIR); fi
 
 test: setup
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n 2 --dist worksteal
 
 setup: system-packages $(VENV)/.installed .node/node_modules/gltf-validator lpips-weights
 

@@ -10,6 +10,15 @@ import pytest
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = Path(os.environ.get("LIRM_SHARED_DATA", REPO_ROOT.parent / "shared" / "data"))
 
+# Under pytest-xdist each worker is one process of several sharing the cores: one thread each (and
+# for the processes the tests start), since two processes of two OpenMP threads on two cores thrash.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    for _name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[_name] = "1"
+    import torch
+
+    torch.set_num_threads(1)
+
 
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
