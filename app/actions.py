@@ -161,13 +161,19 @@ class AppActions:
         return self._start("capture", f"posing and masking {Path(inputs).name}", args, done)
 
     def _say_exposure(self, capture_dir: Path) -> None:
-        """After an import: a warning when the photos' EXIF says the camera's exposure moved between
-        them (exif_exposure.py), as the capture report says it."""
+        """After an import: a warning when the photos' EXIF, or where it does not say, their shared
+        backgrounds say the camera's exposure moved between them (exif_exposure.py,
+        exposure_estimate.py), as the capture report says it."""
         from lirm.engine.capture.exif_exposure import exposure_note
+        from lirm.engine.capture.exposure_match import estimated_exposure_note
 
-        note = exposure_note([r.exposure_stops for r in Capture.open(capture_dir).records])
+        capture = Capture.open(capture_dir)
+        note = exposure_note([r.exposure_stops for r in capture.records])
         if note and note[1]:
             self.state.say(f"exposure: {note[0]}", "warning")
+        estimated = estimated_exposure_note(capture)
+        if estimated and estimated[1]:
+            self.state.say(f"exposure, from the photos' backgrounds: {estimated[0]}", "warning")
 
     def _say_skipped(self, skipped: list[tuple[str, str]], inputs: str) -> None:
         """After an import: which files it did not take, and why (the Capture panel lists them all)."""

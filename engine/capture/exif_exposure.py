@@ -90,8 +90,9 @@ def exposure_note(stops: Sequence[float | None]) -> tuple[str, bool] | None:
     if stops_apart <= SAME_EXPOSURE_STOPS:
         return text, warn
     if count < len(stops):  # exposure_match.exposure_gains: a photo of unknown exposure has no place to be matched to
-        text += (f"; not matched to one exposure: {len(stops) - count} photo{'s say' if len(stops) - count > 1 else ' says'} "
-                 "nothing of its exposure, so the difference becomes the object's or the light's")
+        text += (f"; not matched by EXIF: {len(stops) - count} photo{'s say' if len(stops) - count > 1 else ' says'} "
+                 "nothing of its exposure, so the capture estimates every photo's exposure from the backgrounds "
+                 "they share instead (where the photos show their surroundings)")
     else:
         text += "; the working copies are matched to the most exposed photo (the others brightened in linear light)"
     if warn:

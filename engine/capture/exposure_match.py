@@ -6,7 +6,9 @@ backgrounds, LIRM's inputs, the refinement's photometric terms, the export's tex
 views) compares a pixel of one photo with a pixel of another as the same radiance. The EXIF says how
 each was exposed (exif_exposure.py: stops = log2(time x ISO / 100 / f-number^2)), so each photo's
 linear radiance can be scaled to a common exposure: through the capture's camera curve to linear
-light, times 2^(reference - stops), and back.
+light, times 2^(reference - stops), and back. Where a photo's EXIF does not say, the lighting stage
+reads every photo's exposure from the backgrounds they share instead (exposure_estimate.py), and
+those are matched the same way when the estimate is clear enough.
 
 The reference is the most exposed photo, so every other photo is brightened, never darkened: a
 pixel the camera clipped stays clipped (the lighting estimate and the texture fit read a clipped value
@@ -26,18 +28,20 @@ import numpy as np
 
 from lirm.engine.lighting.camera_response import RESPONSES, display_to_radiance, radiance_to_display
 
+from .exposure_estimate import ESTIMATE_NOISE_STOPS, MAX_RESIDUAL_STOPS
+
 # Exposures this close are the same: EXIF rounds a shutter time (1/60 written for 1/64 is 0.09 EV).
 SAME_EXPOSURE_STOPS = 0.1
 
 
-def exposure_gains(stops: Mapping[str, float | None]) -> dict[str, float] | None:
+def exposure_gains(stops: Mapping[str, float | None], same_within: float = SAME_EXPOSURE_STOPS) -> dict[str, float] | None:
     """Per frame, the factor on its linear radiance that makes it as exposed as the most exposed
     frame: 2^(max - stops), 1 for that frame. None when the photos need no matching (all within
-    `SAME_EXPOSURE_STOPS`) or cannot be matched (a frame without EXIF exposure: its place is unknown)."""
+    `same_within` stops) or cannot be matched (a frame without EXIF exposure: its place is unknown)."""
     if len(stops) < 2 or any(s is None for s in stops.values()):
         return None
     most = max(stops.values())
-    if most - min(stops.values()) <= SAME_EXPOSURE_STOPS:
+    if most - min(stops.values()) <= same_within:
         return None
     return {frame: float(2.0 ** (most - s)) for frame, s in stops.items()}
 
@@ -60,9 +64,47 @@ def match_exposure(image: np.ndarray, gain: float, response: str) -> np.ndarray:
     return out
 
 
+# Where the capture keeps the exposures estimated from the backgrounds (exposure_estimate.py).
+ESTIMATED_EXPOSURE_KEY = "estimated_exposure"
+
+
 def capture_exposure_gains(capture) -> dict[str, float] | None:
-    """`exposure_gains` of every frame of a capture (its records' EXIF exposures)."""
-    return exposure_gains({frame_id: state.record.exposure_stops for frame_id, state in capture.frames.items()})
+    """`exposure_gains` of a capture's frames: from their EXIF exposures when every photo has one, else
+    from the exposures the lighting stage estimated from the photos' shared backgrounds (kept in the
+    capture's settings; matched only beyond the estimate's own noise, ESTIMATE_NOISE_STOPS)."""
+    exif = {frame_id: state.record.exposure_stops for frame_id, state in capture.frames.items()}
+    if all(s is not None for s in exif.values()):
+        return exposure_gains(exif)
+    estimated = capture.settings.get(ESTIMATED_EXPOSURE_KEY)
+    if not estimated or not estimated.get("matched"):
+        return None
+    return exposure_gains({f: float(s) for f, s in estimated["stops"].items()}, ESTIMATE_NOISE_STOPS)
+
+
+def estimated_exposure_note(capture) -> tuple[str, bool] | None:
+    """What the capture report (and the app, after an import) says of the exposures the backgrounds
+    gave (exposure_estimate.py): the sentence, and whether it is a warning (the exposure moved more
+    than exif_exposure.WARN_SPREAD_STOPS); None when EXIF told every exposure or nothing was estimated."""
+    from .exif_exposure import WARN_SPREAD_STOPS  # (exif_exposure imports this module)
+
+    estimated = capture.settings.get(ESTIMATED_EXPOSURE_KEY)
+    if not estimated or all(state.record.exposure_stops is not None for state in capture.frames.values()):
+        return None
+    found = estimated["stops"]
+    spread = max(found.values()) - min(found.values())
+    text = f"{len(found)} photos, {spread:.1f} EV between the brightest and darkest exposed"
+    if not estimated.get("matched") and estimated.get("residual_stops", 0.0) > MAX_RESIDUAL_STOPS:
+        return text + (f", but the photos' backgrounds disagree with each other by {estimated['residual_stops']:.2f} EV "
+                       f"(more than {MAX_RESIDUAL_STOPS}: surroundings too near or patterned to compare), so nothing "
+                       "was matched"), False
+    if spread <= ESTIMATE_NOISE_STOPS:
+        return text + f" (within the estimate's own {ESTIMATE_NOISE_STOPS} EV: one exposure, nothing matched)", False
+    text += "; the working copies are matched to the most exposed photo (the others brightened in linear light)"
+    warn = spread > WARN_SPREAD_STOPS
+    if warn:
+        text += (", which leaves a phone's own tone mapping and the highlights the brightening clips: lock the exposure "
+                 "when shooting (on a phone, press and hold on the object to lock AE/AF) or use manual exposure")
+    return text, warn
 
 
 def capture_response(capture) -> str:

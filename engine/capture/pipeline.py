@@ -26,7 +26,9 @@ from .capture_folder import Capture, FrameState
 from .colmap_posing import ColmapConfig, extend_colmap_pose, map_again_without, pose_with_colmap
 from .focal_check import pose_again_if_focal_is_off
 from .crop import CropConfig, EmptyMaskError, prepare_view
-from .exposure_match import capture_exposure_gains, capture_response, exposure_matched_image, match_exposure
+from .exposure_estimate import ESTIMATE_NOISE_STOPS, estimate_exposure_stops
+from .exposure_match import (ESTIMATED_EXPOSURE_KEY, capture_exposure_gains, capture_response, exposure_gains,
+                             exposure_matched_image, match_exposure)
 from ..lighting.camera_response import RESPONSES, response_for_capture
 from ..lighting.capture_lighting import CaptureLightingConfig, estimate_capture_lighting
 from .disk_space import require_free_space, stage_bytes
@@ -607,35 +609,48 @@ def _lighting(capture: Capture, config: CaptureConfig, cancel) -> None:
         if mask is not None:
             images[f], masks[f] = capture.read_image(f), mask
     plane = capture.normalization.plane if capture.normalization is not None else None
-    gains = capture_exposure_gains(capture)  # the photos at one exposure (exposure_match.py), through the curve tried
+    # The photos at one exposure (exposure_match.py), through the curve tried: by their EXIF when every
+    # photo has it, else by the exposures their shared backgrounds say (exposure_estimate.py), made again
+    # here from this run's photos.
+    capture.settings.pop(ESTIMATED_EXPOSURE_KEY, None)
+    gains = capture_exposure_gains(capture)
+    exif_known = all(state.record.exposure_stops is not None for state in capture.frames.values())
 
     def estimate(response: str):
-        matched = {f: match_exposure(image, gains[f], response) for f, image in images.items()} if gains else images
+        curve = replace(config.lighting, response=response)
         try:
-            return estimate_capture_lighting(matched, masks, capture.cameras, replace(config.lighting, response=response),
-                                             cancel=cancel, support_plane=plane)
+            found = None if exif_known else estimate_exposure_stops(images, masks, capture.cameras, curve, plane, cancel)
+            used = exposure_gains(found.stops, ESTIMATE_NOISE_STOPS) if found is not None and found.worth_matching else gains
+            matched = {f: match_exposure(image, used[f], response) for f, image in images.items()} if used else images
+            return estimate_capture_lighting(matched, masks, capture.cameras, curve, cancel=cancel, support_plane=plane), found
         except InterruptedError as error:
             raise Cancelled(str(error)) from error
         except ValueError as error:
             capture.log("lighting", estimated=False, reason=str(error))
             capture.save()
-            return None
+            return None, None
 
     # Clipping is judged on the display values, whatever the curve: estimate once, then again through
     # the curve the clipped share chooses (about 2 s).
-    lighting = estimate(config.camera_response if config.camera_response in RESPONSES else "aces")
+    lighting, found = estimate(config.camera_response if config.camera_response in RESPONSES else "aces")
     if lighting is None:
         return
     response, why = response_for_capture(config.camera_response, bool(capture.settings.get("plain_backdrop")),
                                          lighting.clipped_fraction)
     if response != lighting.config.response:
-        lighting = estimate(response)
+        lighting, found = estimate(response)
         if lighting is None:
             return
+    exposures = {}
+    if found is not None:
+        capture.settings[ESTIMATED_EXPOSURE_KEY] = {"stops": {f: round(s, 3) for f, s in found.stops.items()},
+                                                    "pairs": found.pairs, "residual_stops": round(found.residual_stops, 3),
+                                                    "matched": found.worth_matching}
+        exposures = {"exposure_estimated_spread": round(found.spread, 2), "exposure_matched": found.worth_matching}
     path = lighting.save(capture.root)
     capture.log("lighting", estimated=True, file=str(path.relative_to(capture.root)), photos=lighting.photos_used,
                 seen=round(lighting.seen_fraction, 3), clipped=round(lighting.clipped_fraction, 3),
-                camera_response=response, camera_response_why=why)
+                camera_response=response, camera_response_why=why, **exposures)
     capture.save()
 
 

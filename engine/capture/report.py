@@ -24,7 +24,7 @@ def format_capture_report(summary: CaptureSummary, reference: Path | None = None
     lens_line = _lens_line(capture.records)
     if lens_line:
         lines.append(lens_line)
-    exposure_line = _exposure_line(capture.records)
+    exposure_line = _exposure_line(capture)
     if exposure_line:
         lines.append(exposure_line)
     focal_note = _focal_check_of_last_pose(capture.history)
@@ -88,13 +88,21 @@ def _lens_line(records) -> str | None:
             f"lens{'es' if len(lenses) > 1 else ''} ({shown} in the working images)")
 
 
-def _exposure_line(records) -> str | None:
+def _exposure_line(capture) -> str | None:
     """How far apart the photos' exposures were (exif_exposure.py), with the fix when the camera's
-    automatic exposure moved enough to show as the object's brightness."""
+    automatic exposure moved enough to show as the object's brightness; for photos whose EXIF does
+    not say, what their backgrounds said (exposure_estimate.py)."""
     from .exif_exposure import exposure_note
+    from .exposure_match import estimated_exposure_note
 
-    note = exposure_note([r.exposure_stops for r in records])
-    return f"  exposure from EXIF: {note[0]}" if note else None
+    lines = []
+    note = exposure_note([r.exposure_stops for r in capture.records])
+    if note:
+        lines.append(f"  exposure from EXIF: {note[0]}")
+    estimated = estimated_exposure_note(capture)
+    if estimated:
+        lines.append(f"  exposure from the photos' shared backgrounds (their EXIF does not say): {estimated[0]}")
+    return "\n".join(lines) or None
 
 
 def _focal_check_of_last_pose(history: list[dict]) -> str | None:

@@ -134,8 +134,7 @@ def estimate_capture_lighting(images: dict, masks: dict, cameras: dict, config: 
     frames = [f for f in sorted(cameras) if f in images and f in masks]
     if not frames:
         raise ValueError("no posed photo with a mask to estimate the lighting from")
-    distance = float(np.median([np.linalg.norm(cameras[f].center) for f in frames]))
-    radius = config.proxy_radius * distance
+    radius = proxy_radius_of({f: cameras[f] for f in frames}, config)
     h, w = config.width // 2, config.width
     total = np.zeros((h * w, 3))
     count = np.zeros(h * w)
@@ -144,17 +143,9 @@ def estimate_capture_lighting(images: dict, masks: dict, cameras: dict, config: 
     for f in frames:
         if cancel is not None and cancel():
             raise InterruptedError("cancelled while estimating the capture lighting")
-        rgb, background = _background_pixels(images[f], masks[f], config)
-        if not background.any():
+        texel, display = background_samples(images[f], masks[f], cameras[f], config, radius, support_plane)
+        if len(texel) == 0:
             continue
-        ys, xs = np.nonzero(background)
-        step = max(1, int(np.ceil(len(ys) / config.pixels_per_photo)))
-        ys, xs = ys[::step], xs[::step]
-        display = rgb[ys, xs].astype(np.float64) / 255.0
-        origins, directions = cameras[f].rays_at(np.stack([xs + 0.5, ys + 0.5], -1))
-        landing = origins + directions * _distance_to_proxy(origins, directions, radius, support_plane)[:, None]
-        u, v = direction_to_equirect_uv(landing)
-        texel = np.minimum((v * h).astype(np.int64), h - 1) * w + np.minimum((u * w).astype(np.int64), w - 1)
         radiance = display_to_radiance(display, config.response)
         total += np.stack([np.bincount(texel, radiance[:, c], h * w) for c in range(3)], 1)
         count += np.bincount(texel, minlength=h * w)
@@ -168,6 +159,31 @@ def estimate_capture_lighting(images: dict, masks: dict, cameras: dict, config: 
     environment = Environment(filled.astype(np.float32), name=ENVIRONMENT_NAME)
     share = (clipped / np.maximum(count, 1)).reshape(h, w)
     return CaptureLighting(environment, observed, share, used, config, support_plane is not None)
+
+
+def proxy_radius_of(cameras: dict, config: CaptureLightingConfig) -> float:
+    """The proxy sphere's radius: `config.proxy_radius` x the cameras' median distance from the object."""
+    return config.proxy_radius * float(np.median([np.linalg.norm(c.center) for c in cameras.values()]))
+
+
+def background_samples(image: np.ndarray, mask: np.ndarray, camera, config: CaptureLightingConfig, radius: float,
+                       support_plane: tuple[np.ndarray, float] | None) -> tuple[np.ndarray, np.ndarray]:
+    """One photo's background, as the panorama sees it: for a regular subsample of its pixels outside
+    the (grown) mask, the panorama texel (row-major index into width / 2 x width) its ray lands on
+    through the proxy, and its display value (K, 3) in [0, 1]."""
+    rgb, background = _background_pixels(image, mask, config)
+    if not background.any():
+        return np.zeros(0, np.int64), np.zeros((0, 3))
+    h, w = config.width // 2, config.width
+    ys, xs = np.nonzero(background)
+    step = max(1, int(np.ceil(len(ys) / config.pixels_per_photo)))
+    ys, xs = ys[::step], xs[::step]
+    display = rgb[ys, xs].astype(np.float64) / 255.0
+    origins, directions = camera.rays_at(np.stack([xs + 0.5, ys + 0.5], -1))
+    landing = origins + directions * _distance_to_proxy(origins, directions, radius, support_plane)[:, None]
+    u, v = direction_to_equirect_uv(landing)
+    texel = np.minimum((v * h).astype(np.int64), h - 1) * w + np.minimum((u * w).astype(np.int64), w - 1)
+    return texel, display
 
 
 def _background_pixels(image: np.ndarray, mask: np.ndarray, config: CaptureLightingConfig) -> tuple[np.ndarray, np.ndarray]:

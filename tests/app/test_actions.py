@@ -129,3 +129,30 @@ def test_an_import_whose_photos_were_exposed_apart_warns_with_the_fix(app, share
     last = app.state.messages[-1]
     assert last.level == "warning" and last.text.startswith("exposure: 4 of 4 photos, 2.0 EV between"), last.text
     assert "lock the exposure" in last.text
+
+
+def test_an_import_whose_backgrounds_say_the_exposure_moved_warns_with_the_fix(app, shared_data, tmp_path):
+    """Photos without EXIF exposure whose shared backgrounds said they were exposed 1.1 EV apart (the
+    capture's lighting stage writes that, exposure_estimate.py; written here on a capture of cut-outs)."""
+    from lirm.engine.capture.capture_folder import Capture
+    from lirm.engine.capture.exposure_match import ESTIMATED_EXPOSURE_KEY
+    from lirm.engine.cli import main
+
+    lego = shared_data / "synth_nerf_lego_train"
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for k in range(3):
+        (photos / f"r_{5 * k}.png").write_bytes((lego / "train" / f"r_{5 * k}.png").read_bytes())
+    folder = tmp_path / "capture"
+    assert main(["capture", str(photos), "-o", str(folder), "--masks", "alpha", "--size", "32",
+                 "--poses", str(lego / "transforms_train.json")]) == 0
+    app._say_exposure(folder)
+    assert not any("exposure" in m.text for m in app.state.messages)  # cut-outs: nothing to estimate from
+    capture = Capture.open(folder)
+    stops = dict(zip(sorted(capture.frames), (0.4, -0.7, 0.3)))
+    capture.settings[ESTIMATED_EXPOSURE_KEY] = {"stops": stops, "pairs": 3, "residual_stops": 0.02, "matched": True}
+    capture.save()
+    app._say_exposure(folder)
+    last = app.state.messages[-1]
+    assert last.level == "warning" and last.text.startswith("exposure, from the photos' backgrounds: 3 photos, 1.1 EV"), last.text
+    assert "matched to the most exposed photo" in last.text and "lock the exposure" in last.text

@@ -87,7 +87,7 @@ def test_the_report_says_whether_the_photos_were_matched():
     matched, warned = exposure_note([-8.0, -9.0, -8.5])
     assert warned and "matched to the most exposed photo" in matched and "lock the exposure" in matched
     unmatched, _ = exposure_note([-8.0, None, -9.0])
-    assert "not matched to one exposure: 1 photo says nothing of its exposure" in unmatched
+    assert "not matched by EXIF: 1 photo says nothing of its exposure" in unmatched and "backgrounds they share" in unmatched
     small, warned = exposure_note([-8.0, -8.3])
     assert not warned and "matched" in small and "lock" not in small
     same, _ = exposure_note([-8.0, -8.05])

@@ -296,4 +296,9 @@ def test_pipeline_on_a_gltf_photographed_on_a_floor_under_an_hdri(tmp_path, shar
     lighting = resolve_environment(tmp_path / "capture")
     assert lighting.name == "as photographed" and lighting.radiance.shape == (64, 128, 3)
     assert (tmp_path / "capture" / "lighting" / "as_photographed.png").is_file()
-    assert "lighting as photographed: lighting/as_photographed.hdr from the backgrounds of 16 photos" in format_capture_report(summary)
+    report = format_capture_report(summary)
+    assert "lighting as photographed: lighting/as_photographed.hdr from the backgrounds of 16 photos" in report
+    # Photos at one exposure, without EXIF: their backgrounds say so, and nothing is brightened
+    # (exposure_estimate.py; the photos exposed apart are in test_exposure_estimate.py).
+    assert "exposure from the photos' shared backgrounds" in report and "one exposure, nothing matched" in report, report
+    assert not [e for e in capture.history if e.get("action") == "crops"][-1].get("exposure_matched")
