@@ -12,6 +12,12 @@ texels both saw (robust to the patches the proxy misplaces and to a reflection t
 view); then the exposures that agree best with all pairs (weighted least squares, weights the shared
 texels, the mean fixed at 0).
 
+The same comparison channel by channel gives each photo's white balance (a phone balances every shot
+on its own too, and no EXIF tag says by how much): per photo, its red, green and blue offsets from its
+own mean, relative to the shoot's average balance. The surroundings' sheen that biases the exposure is
+white, so the balance is read far more closely (0.01-0.02 EV at one balance, the demo shoot and the
+fox).
+
 Returned as "stops" in the same sense as the EXIF's (larger: more exposed), so exposure_match's gains
 take them as they take the EXIF's. Estimated spreads up to `ESTIMATE_NOISE_STOPS` are what photos at
 one exposure give (the proxy's parallax, view-dependent floors), so those are not matched. Nor is an
@@ -38,6 +44,9 @@ ESTIMATE_NOISE_STOPS = 0.3
 # Pairs that disagree by more than this with the fitted exposures (median) mean the surroundings were
 # misplaced: 0.01-0.04 EV on rendered shoots, 0.22 on five photos of the fox before its wallpaper.
 MAX_RESIDUAL_STOPS = 0.1
+# Colour offsets this small are the estimate's noise (0.01-0.02 EV measured at one white balance): a
+# spread within it is one balance, left alone.
+COLOUR_NOISE_STOPS = 0.05
 # Display values below this are mostly the 8-bit steps and the curve's toe; above the clip level, a bound.
 DARK_LEVEL = 0.04
 MIN_SHARED_TEXELS = 12  # a pair of photos that shares fewer says nothing of their exposures
@@ -49,10 +58,23 @@ class ExposureEstimate:
     stops: dict[str, float]  # per frame, relative (mean 0; larger: more exposed)
     pairs: int  # pairs of photos that shared enough surroundings
     residual_stops: float  # the median disagreement of a pair with the fitted exposures
+    # Per frame, log2 of its red, green, blue against its own mean, less the shoot's average: a photo
+    # balanced warmer than the others has red > 0 > blue. Dividing by 2^offset balances it as the shoot.
+    colour_stops: dict[str, tuple[float, float, float]]
 
     @property
     def spread(self) -> float:
         return max(self.stops.values()) - min(self.stops.values())
+
+    @property
+    def colour_spread(self) -> float:
+        """The widest spread of one channel's offset over the photos (stops)."""
+        offsets = np.array(list(self.colour_stops.values()))
+        return float((offsets.max(0) - offsets.min(0)).max())
+
+    @property
+    def colour_worth_matching(self) -> bool:
+        return self.reliable and self.colour_spread > COLOUR_NOISE_STOPS
 
     @property
     def reliable(self) -> bool:
@@ -81,11 +103,13 @@ def estimate_exposure_stops(images: dict, masks: dict, cameras: dict, config: Ca
             raise InterruptedError("cancelled while estimating the photos' exposures")
         texel, display = background_samples(images[f], masks[f], cameras[f], config, radius, support_plane)
         usable = (display.max(1) < config.clip_level) & (display.min(1) > DARK_LEVEL)
-        luminance = display_to_radiance(display[usable], config.response) @ _LUMINANCE
+        radiance = display_to_radiance(display[usable], config.response)
         texel = texel[usable]
         count = np.bincount(texel, minlength=texels)
-        total = np.bincount(texel, np.log2(np.maximum(luminance, 1e-8)), texels)
-        means.append(total / np.maximum(count, 1))
+        # log2 of the luminance, then of red, green and blue: one column each
+        logs = np.log2(np.maximum(np.concatenate([radiance @ _LUMINANCE[:, None], radiance], 1), 1e-8))
+        total = np.stack([np.bincount(texel, logs[:, k], texels) for k in range(4)], 1)
+        means.append(total / np.maximum(count, 1)[:, None])
         seen.append(count >= 2)  # one pixel in a texel is too much at the mercy of a stray edge
     rows, targets, weights = [], [], []
     for i in range(len(frames)):
@@ -94,13 +118,18 @@ def estimate_exposure_stops(images: dict, masks: dict, cameras: dict, config: Ca
             n = int(shared.sum())
             if n >= MIN_SHARED_TEXELS:
                 rows.append((i, j))
-                targets.append(float(np.median(means[i][shared] - means[j][shared])))
+                targets.append(np.median(means[i][shared] - means[j][shared], axis=0))
                 weights.append(float(n))
     if not rows or not _all_joined(len(frames), rows):
         return None
-    stops = _fit_exposures(len(frames), rows, np.array(targets), np.array(weights))
-    residual = float(np.median([abs(stops[i] - stops[j] - d) for (i, j), d in zip(rows, targets)]))
-    return ExposureEstimate({f: float(s) for f, s in zip(frames, stops)}, len(rows), residual)
+    targets = np.array(targets)
+    fitted = np.stack([_fit_exposures(len(frames), rows, targets[:, k], np.array(weights)) for k in range(4)], 1)
+    stops = fitted[:, 0]
+    residual = float(np.median([abs(stops[i] - stops[j] - d) for (i, j), d in zip(rows, targets[:, 0])]))
+    colour = fitted[:, 1:] - fitted[:, 1:].mean(1, keepdims=True)
+    colour -= colour.mean(0)  # the shoot's average balance is kept
+    return ExposureEstimate({f: float(s) for f, s in zip(frames, stops)}, len(rows), residual,
+                            {f: tuple(float(v) for v in c) for f, c in zip(frames, colour)})
 
 
 def _fit_exposures(count: int, pairs: list[tuple[int, int]], differences: np.ndarray, weights: np.ndarray) -> np.ndarray:

@@ -26,9 +26,9 @@ from .capture_folder import Capture, FrameState
 from .colmap_posing import ColmapConfig, extend_colmap_pose, map_again_without, pose_with_colmap
 from .focal_check import pose_again_if_focal_is_off
 from .crop import CropConfig, EmptyMaskError, prepare_view
-from .exposure_estimate import ESTIMATE_NOISE_STOPS, estimate_exposure_stops
-from .exposure_match import (ESTIMATED_EXPOSURE_KEY, capture_exposure_gains, capture_response, exposure_gains,
-                             exposure_matched_image, match_exposure)
+from .exposure_estimate import estimate_exposure_stops
+from .exposure_match import (ESTIMATED_EXPOSURE_KEY, capture_exposure_gains, capture_response, estimate_record,
+                             exposure_matched_image, match_exposure, matching_gains)
 from ..lighting.camera_response import RESPONSES, response_for_capture
 from ..lighting.capture_lighting import CaptureLightingConfig, estimate_capture_lighting
 from .disk_space import require_free_space, stage_bytes
@@ -594,7 +594,9 @@ def _crops(capture: Capture, config: CaptureConfig, progress, cancel) -> None:
         done += 1
         if progress:
             progress("crops", done, len(posed))
-    matched = {"exposure_matched": True, "brightened_up_to_stops": round(float(np.log2(max(gains.values()))), 2)} if gains else {}
+    # ("exposure_matched": the working copies were matched, in exposure or white balance or both)
+    matched = {"exposure_matched": True,
+               "brightened_up_to_stops": round(float(np.log2(max(float(np.max(g)) for g in gains.values()))), 2)} if gains else {}
     capture.log("crops", prepared=done, size=config.crop.size, **matched)
     capture.save()
 
@@ -613,15 +615,15 @@ def _lighting(capture: Capture, config: CaptureConfig, cancel) -> None:
     # photo has it, else by the exposures their shared backgrounds say (exposure_estimate.py), made again
     # here from this run's photos.
     capture.settings.pop(ESTIMATED_EXPOSURE_KEY, None)
-    gains = capture_exposure_gains(capture)
-    exif_known = all(state.record.exposure_stops is not None for state in capture.frames.values())
+    exif = {frame_id: state.record.exposure_stops for frame_id, state in capture.frames.items()}
 
     def estimate(response: str):
         curve = replace(config.lighting, response=response)
         try:
-            found = None if exif_known else estimate_exposure_stops(images, masks, capture.cameras, curve, plane, cancel)
-            used = exposure_gains(found.stops, ESTIMATE_NOISE_STOPS) if found is not None and found.worth_matching else gains
-            matched = {f: match_exposure(image, used[f], response) for f, image in images.items()} if used else images
+            found = estimate_exposure_stops(images, masks, capture.cameras, curve, plane, cancel)
+            used = matching_gains(exif, estimate_record(found) if found is not None else None)
+            matched = {f: match_exposure(image, used[f], response) if f in used else image
+                       for f, image in images.items()} if used else images
             return estimate_capture_lighting(matched, masks, capture.cameras, curve, cancel=cancel, support_plane=plane), found
         except InterruptedError as error:
             raise Cancelled(str(error)) from error
@@ -643,10 +645,9 @@ def _lighting(capture: Capture, config: CaptureConfig, cancel) -> None:
             return
     exposures = {}
     if found is not None:
-        capture.settings[ESTIMATED_EXPOSURE_KEY] = {"stops": {f: round(s, 3) for f, s in found.stops.items()},
-                                                    "pairs": found.pairs, "residual_stops": round(found.residual_stops, 3),
-                                                    "matched": found.worth_matching}
-        exposures = {"exposure_estimated_spread": round(found.spread, 2), "exposure_matched": found.worth_matching}
+        capture.settings[ESTIMATED_EXPOSURE_KEY] = estimate_record(found)
+        exposures = {"exposure_estimated_spread": round(found.spread, 2), "exposure_matched": found.worth_matching,
+                     "white_balance_spread": round(found.colour_spread, 3), "white_balance_matched": found.colour_worth_matching}
     path = lighting.save(capture.root)
     capture.log("lighting", estimated=True, file=str(path.relative_to(capture.root)), photos=lighting.photos_used,
                 seen=round(lighting.seen_fraction, 3), clipped=round(lighting.clipped_fraction, 3),

@@ -93,7 +93,7 @@ def _exposure_line(capture) -> str | None:
     automatic exposure moved enough to show as the object's brightness; for photos whose EXIF does
     not say, what their backgrounds said (exposure_estimate.py)."""
     from .exif_exposure import exposure_note
-    from .exposure_match import estimated_exposure_note
+    from .exposure_match import estimated_exposure_note, white_balance_note
 
     lines = []
     note = exposure_note([r.exposure_stops for r in capture.records])
@@ -102,6 +102,9 @@ def _exposure_line(capture) -> str | None:
     estimated = estimated_exposure_note(capture)
     if estimated:
         lines.append(f"  exposure from the photos' shared backgrounds (their EXIF does not say): {estimated[0]}")
+    balance = white_balance_note(capture)
+    if balance:
+        lines.append(f"  white balance from the photos' shared backgrounds: {balance}")
     return "\n".join(lines) or None
 
 

@@ -44,6 +44,12 @@ def test_matching_scales_the_linear_light_keeps_clipped_pixels_and_alpha(respons
     assert np.abs(floats * 255 - matched[..., :3]).max() <= 0.5 + 1e-6
     with pytest.raises(ValueError, match="positive"):
         match_exposure(image, 0.0, response)
+    # One gain a channel (a white balance): a darkened channel keeps its clipped pixels clipped.
+    balanced = match_exposure(image, [0.8, 1.0, 1.25], response)
+    assert (balanced[0, 0, :3] == 255).all() and np.abs(balanced[..., 1].astype(int) - image[..., 1]).max() <= 2  # (the curve and back)
+    inside = (image[..., :3] > 40) & (image[..., :3] < 200)
+    assert (balanced[..., 0][inside[..., 0]] <= image[..., 0][inside[..., 0]]).all()
+    assert (balanced[..., 2][inside[..., 2]] >= image[..., 2][inside[..., 2]]).all()
 
 
 def test_a_capture_exposed_apart_is_cropped_at_one_exposure(shared_data, tmp_path, capsys):
