@@ -611,9 +611,9 @@ def _lighting(capture: Capture, config: CaptureConfig, cancel) -> None:
         if mask is not None:
             images[f], masks[f] = capture.read_image(f), mask
     plane = capture.normalization.plane if capture.normalization is not None else None
-    # The photos at one exposure (exposure_match.py), through the curve tried: by their EXIF when every
-    # photo has it, else by the exposures their shared backgrounds say (exposure_estimate.py), made again
-    # here from this run's photos.
+    # The photos at one exposure and white balance (exposure_match.py), through the curve tried: the
+    # exposure by their EXIF when every photo has it, else by what their shared backgrounds say; the
+    # balance by the backgrounds (exposure_estimate.py); estimated again here from this run's photos.
     capture.settings.pop(ESTIMATED_EXPOSURE_KEY, None)
     exif = {frame_id: state.record.exposure_stops for frame_id, state in capture.frames.items()}
 
