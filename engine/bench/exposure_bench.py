@@ -19,11 +19,10 @@ import numpy as np
 from PIL import Image
 
 from lirm.engine.capture.capture_folder import Capture
-from lirm.engine.capture.exposure_estimate import COLOUR_NOISE_STOPS, ESTIMATE_NOISE_STOPS
+from lirm.engine.capture.exposure_estimate import COLOUR_NOISE_STOPS, ESTIMATE_NOISE_STOPS, colour_spread
 from lirm.engine.capture.exposure_match import ESTIMATED_EXPOSURE_KEY, match_exposure
 from lirm.engine.errors import LirmUserError
-
-_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+from lirm.renderer.procedural_environments import LUMINANCE_WEIGHTS as _LUMINANCE
 
 
 @dataclass(frozen=True)
@@ -115,7 +114,7 @@ def _score(capture: Capture, truth: dict | None = None) -> EstimateScore:
     frames = sorted(estimated["stops"])
     stops = np.array([estimated["stops"][f] for f in frames])
     colour = np.array([estimated["colour_stops"][f] for f in frames])
-    score = EstimateScore(float(np.ptp(stops)), float(np.ptp(colour, axis=0).max()), bool(estimated["matched"]),
+    score = EstimateScore(float(np.ptp(stops)), colour_spread(estimated["colour_stops"]), bool(estimated["matched"]),
                           bool(estimated["colour_matched"]), float(capture.settings.get("timings", {}).get("lighting", 0.0)))
     if truth is not None:
         names = [capture.frames[f].record.original.stem for f in frames]

@@ -34,6 +34,7 @@ import numpy as np
 
 from lirm.engine.lighting.camera_response import display_to_radiance
 from lirm.engine.lighting.capture_lighting import CaptureLightingConfig, background_samples, proxy_radius_of
+from lirm.renderer.procedural_environments import LUMINANCE_WEIGHTS as _LUMINANCE
 
 # Spreads this small are the estimate's own noise, not an exposure that moved. Photos at one exposure
 # gave 0.00-0.05 EV of a real HDRI's surroundings (tests/engine/capture/test_exposure_estimate.py) and
@@ -50,7 +51,6 @@ COLOUR_NOISE_STOPS = 0.05
 # Display values below this are mostly the 8-bit steps and the curve's toe; above the clip level, a bound.
 DARK_LEVEL = 0.04
 MIN_SHARED_TEXELS = 12  # a pair of photos that shares fewer says nothing of their exposures
-_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 @dataclass(frozen=True)
@@ -68,9 +68,7 @@ class ExposureEstimate:
 
     @property
     def colour_spread(self) -> float:
-        """The widest spread of one channel's offset over the photos (stops)."""
-        offsets = np.array(list(self.colour_stops.values()))
-        return float((offsets.max(0) - offsets.min(0)).max())
+        return colour_spread(self.colour_stops)
 
     @property
     def colour_worth_matching(self) -> bool:
@@ -84,6 +82,12 @@ class ExposureEstimate:
     def worth_matching(self) -> bool:
         """Whether the photos should be brought to one exposure by this estimate (module doc)."""
         return self.reliable and self.spread > ESTIMATE_NOISE_STOPS
+
+
+def colour_spread(colour_stops) -> float:
+    """The widest spread of one channel's offset over the photos (stops), of per-frame (r, g, b) offsets."""
+    offsets = np.array(list(colour_stops.values()))
+    return float((offsets.max(0) - offsets.min(0)).max())
 
 
 def estimate_exposure_stops(images: dict, masks: dict, cameras: dict, config: CaptureLightingConfig,

@@ -28,13 +28,13 @@ from typing import Mapping
 import numpy as np
 
 from lirm.engine.lighting.camera_response import RESPONSES, display_to_radiance, radiance_to_display
+from lirm.renderer.procedural_environments import LUMINANCE_WEIGHTS as _LUMINANCE
 
-from .exposure_estimate import COLOUR_NOISE_STOPS, ESTIMATE_NOISE_STOPS, MAX_RESIDUAL_STOPS
+from .exposure_estimate import COLOUR_NOISE_STOPS, ESTIMATE_NOISE_STOPS, MAX_RESIDUAL_STOPS, colour_spread
 
 # Exposures this close are the same: EXIF rounds a shutter time (1/60 written for 1/64 is 0.09 EV).
 SAME_EXPOSURE_STOPS = 0.1
 CLIPPED_DISPLAY = 250.0 / 255.0  # a display value this high was clipped (CaptureLightingConfig.clip_level)
-_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 def exposure_gains(stops: Mapping[str, float | None], same_within: float = SAME_EXPOSURE_STOPS) -> dict[str, float] | None:
@@ -150,9 +150,8 @@ def white_balance_note(capture) -> str | None:
     estimated = capture.settings.get(ESTIMATED_EXPOSURE_KEY)
     if not estimated or not estimated.get("colour_stops") or estimated.get("residual_stops", 0.0) > MAX_RESIDUAL_STOPS:
         return None
-    offsets = np.array(list(estimated["colour_stops"].values()))
-    spread = float((offsets.max(0) - offsets.min(0)).max())
-    text = f"{len(offsets)} photos, {100 * (2 ** spread - 1):.0f}% apart in one colour at most"
+    spread = colour_spread(estimated["colour_stops"])
+    text = f"{len(estimated['colour_stops'])} photos, {100 * (2 ** spread - 1):.0f}% apart in one colour at most"
     if estimated.get("colour_matched"):
         return text + " (the camera balanced each shot on its own); the working copies are balanced as the shoot's average"
     return text + f" (within the estimate's own {100 * (2 ** COLOUR_NOISE_STOPS - 1):.0f}%: one white balance, nothing matched)"
