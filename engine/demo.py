@@ -99,6 +99,8 @@ def run_demo(out_dir: str | Path, config: DemoConfig = DemoConfig(), progress: C
         "environment": config.shoot_environment,
         "environment_width": config.environment_width,
         "lighting_file": TRUE_LIGHTING_FILE,  # what lit the object: `lirm bench lighting` compares with it
+        "object": config.shoot.object_name,  # what was photographed: `lirm bench relight` relights it
+        "object_seed": config.shoot.seed,
         "frames": [{"file_path": f"../photos/shot_{k}.jpg", **cam.to_dict()} for k, cam in sorted(shoot.cameras.items())],
     })
 

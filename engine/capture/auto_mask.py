@@ -45,7 +45,7 @@ import cv2
 import numpy as np
 
 from lirm.engine.cameras import Camera
-from lirm.engine.capture.floor_parallax import floor_disagreement, nearest_views, off_floor_evidence
+from lirm.engine.capture.floor_parallax import floor_agreement, floor_disagreement, floor_sight, nearest_views, off_floor_evidence
 from lirm.engine.capture.masks import check_mask
 from lirm.engine.capture.normalize import is_floor
 from lirm.engine.capture.plain_backdrop import BACKDROP, BACKDROP_COLOURED
@@ -133,6 +133,15 @@ class AutoMaskConfig:
     # floor (README, "Captures").
     floor_parallax_threshold: float = 48.0
     floor_parallax_neighbours: int = 4
+    # Above a textured floor: pixels whose pattern matches what two nearby views see round the same
+    # floor point (floor_parallax.floor_agreement, zero-mean correlation above this) are definite
+    # background in the refining pass: the floor seen through a mug's handle, which the first pass
+    # and the hull take for object (every view sees the hole filled with object-like colour). Not
+    # where the floor point lies within `floor_contact_margin` (fraction of the ball's radius) of
+    # where the hull meets the floor: the object's base is within a pixel's parallax of the floor
+    # there and agrees with it. 0 turns it off.
+    floor_agreement_threshold: float = 0.8
+    floor_contact_margin: float = 0.15
     # Edge refinement when upsampling to full size: guided filter radius (full-size pixels, scaled
     # with the upsampling factor) and regularisation (guide intensities in [0, 1]); falls back to
     # bilinear upsampling when opencv-contrib's ximgproc is missing.
@@ -150,6 +159,9 @@ class _Level:
     inside_ball: np.ndarray
     # Pixels that cannot be the floor (floor_parallax.py), or None where that is not known.
     off_floor: np.ndarray | None = None
+    # Pixels whose floor pattern matches nearby views' (floor_parallax.floor_agreement): (N, 2)
+    # pixel indices (row, column) and the (N, 3) floor points their rays meet; None where unknown.
+    on_floor: tuple[np.ndarray, np.ndarray] | None = None
     # On a plain backdrop (plain_backdrop.py): the backdrop map at this level's size, else None.
     backdrop: np.ndarray | None = None
 
@@ -240,11 +252,63 @@ def _attach_floor_evidence(views: dict[str, "_View"], images: Mapping[str, np.nd
         # 1.5 pixels of a 640-pixel photo (poses are right to about a pixel), in working pixels.
         blur = 1.5 * max(view.full_w, view.full_h) / 640.0 * work.camera.width / (view.x1 - view.x0)
         others = [scaled[g] for g in nearest_views({g: cameras[g] for g in views}, f, cfg.floor_parallax_neighbours)]
-        disagreement = floor_disagreement(work.camera, work.image, others, plane, reach=_FLOOR_REACH * radius,
-                                          blur_px=max(blur, 0.5))
+        sight = floor_sight(work.camera, work.image, others, plane, reach=_FLOOR_REACH * radius, blur_px=max(blur, 0.5))
+        disagreement = floor_disagreement(work.camera, work.image, others, plane, sight=sight)
         work.off_floor = off_floor_evidence(disagreement, cfg.floor_parallax_threshold)
+        if cfg.floor_agreement_threshold > 0:
+            agreement = floor_agreement(work.camera, work.image, others, plane, sight=sight)
+            pixels = np.argwhere(np.nan_to_num(agreement, nan=-1.0) > cfg.floor_agreement_threshold)
+            work.on_floor = (pixels, _floor_points(work.camera, pixels, plane))
         size = (view.seed.camera.width, view.seed.camera.height)
         view.seed.off_floor = cv2.resize(work.off_floor.astype(np.float32), size, interpolation=cv2.INTER_AREA) > 0.5
+
+
+def _floor_points(camera: Camera, pixels: np.ndarray, plane: tuple[np.ndarray, float]) -> np.ndarray:
+    """(N, 3): where the rays of `pixels` ((N, 2) rows and columns) meet the plane."""
+    normal, offset = np.asarray(plane[0], dtype=np.float64), float(plane[1])
+    origins, directions = camera.pixel_rays()
+    o, d = origins[pixels[:, 0], pixels[:, 1]], directions[pixels[:, 0], pixels[:, 1]]
+    t = (offset - o @ normal) / np.where(np.abs(d @ normal) < 1e-9, 1e-9, d @ normal)
+    return o + t[:, None] * d
+
+
+# Hull voxels this many voxels above the floor (after cut_below_plane's layer) count as its base.
+_CONTACT_VOXELS = 4.0
+
+
+def _away_from_contact(on_floor: tuple[np.ndarray, np.ndarray], hull: VoxelHull | None,
+                       plane: tuple[np.ndarray, float] | None, margin: float) -> np.ndarray:
+    """The on-floor pixels whose floor point lies farther than `margin` from where the hull meets
+    the floor (its voxels within a few of the plane, projected onto it, on a grid of the hull's
+    voxels). Without a hull or a plane, none: nothing says where the object's base is."""
+    pixels, points = on_floor
+    if hull is None or plane is None or len(pixels) == 0:
+        return pixels[:0]
+    normal, offset = np.asarray(plane[0], dtype=np.float64), float(plane[1])
+    centres = hull.occupied_centers()
+    base = centres[centres @ normal - offset < (1.5 + _CONTACT_VOXELS) * hull.voxel_size]
+    if len(base) == 0:
+        return pixels
+    # Two axes in the plane; the grid spans the hull's cube (a floor point beyond is far from the base).
+    helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+    u = np.cross(normal, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    cells = 2 * int(math.ceil(np.sqrt(3.0) * hull.resolution / 2.0)) + 1
+    half = cells // 2
+
+    def cell_of(p: np.ndarray) -> np.ndarray:
+        return np.round(np.stack([p @ u, p @ v], axis=-1) / hull.voxel_size).astype(np.int64) + half
+
+    grid = np.zeros((cells, cells), np.uint8)
+    ij = cell_of(base)
+    grid[ij[:, 0], ij[:, 1]] = 1
+    grid = cv2.dilate(grid, _odd_kernel(margin / hull.voxel_size)) > 0
+    ij = cell_of(points)
+    inside = np.all((ij >= 0) & (ij < cells), axis=1)
+    near = np.zeros(len(points), bool)
+    near[inside] = grid[ij[inside, 0], ij[inside, 1]]
+    return pixels[~near]
 
 
 @dataclass
@@ -419,7 +483,8 @@ def clean_mask(mask: np.ndarray, min_component_fraction: float = 0.02, max_hole_
 
 
 def _refine_trimap(
-    level: _Level, mask: np.ndarray, hull_mask: np.ndarray | None, seeds: _Seeds, cfg: AutoMaskConfig
+    level: _Level, mask: np.ndarray, hull_mask: np.ndarray | None, seeds: _Seeds, cfg: AutoMaskConfig,
+    floor_seen: np.ndarray | None = None,
 ) -> np.ndarray:
     """Refining-pass labels: the mask, trimmed to the hull's outline when there is one, is probably
     object, a band around it probably background, the rest background; the points' seeds (and
@@ -440,6 +505,9 @@ def _refine_trimap(
         tri[cv2.erode(m8, _odd_kernel(cfg.refine_core_erosion * long_side)) > 0] = _FGD
     if level.backdrop is not None:
         tri[level.backdrop == BACKDROP] = _BGD
+    if floor_seen is not None and len(floor_seen):
+        # The floor seen through the object (a handle's hole): background, whatever the hull says.
+        tri[floor_seen[:, 0], floor_seen[:, 1]] = _BGD
     if level.off_floor is not None:
         tri[level.off_floor & level.inside_ball] = _FGD
     _draw_seeds(tri, seeds, level, cfg)
@@ -584,7 +652,16 @@ def automatic_masks(
                 m = cv2.resize(m.astype(np.uint8), (work.camera.width, work.camera.height),
                                interpolation=cv2.INTER_LINEAR) > 0
             hull_mask = None if hull is None else project_hull(hull, work.camera)
-            tri = _refine_trimap(work, m, hull_mask, _project_seeds(work, pts, radius, cfg, labels, seen_by.get(f)), cfg)
+            floor_seen = None
+            if work.on_floor is not None:
+                # Only where the trimap would say object matters (the floor beside it is background anyway).
+                pixels, points = work.on_floor
+                claimed = m if hull_mask is None else m | (hull_mask > 0)
+                inside = claimed[pixels[:, 0], pixels[:, 1]]
+                floor_seen = _away_from_contact((pixels[inside], points[inside]), hull, support_plane,
+                                                cfg.floor_contact_margin * radius)
+            tri = _refine_trimap(work, m, hull_mask, _project_seeds(work, pts, radius, cfg, labels, seen_by.get(f)), cfg,
+                                 floor_seen)
             res = _grabcut(work.image, tri, cfg.refine_iterations, cfg, models.get(f))
             if res is not None:
                 m = clean_mask(res[0], cfg.min_component_fraction, cfg.max_hole_fraction)

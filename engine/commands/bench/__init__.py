@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from . import app_idle, app_refine, capacity, capture, export, exposure, lighting, model, refine, render, suggest, synth, train, trajectory, update_order
+from . import app_idle, app_refine, capacity, capture, export, exposure, lighting, model, refine, relight, render, suggest, synth, train, trajectory, update_order
 
-BENCHMARKS = (model, capacity, export, suggest, trajectory, refine, lighting, exposure, update_order, synth, train, render, capture, app_idle, app_refine)  # as listed
+BENCHMARKS = (model, capacity, export, suggest, trajectory, refine, lighting, relight, exposure, update_order, synth, train, render, capture, app_idle, app_refine)  # as listed
 
 
 def add_parser(subparsers) -> None:
