@@ -165,7 +165,7 @@ class AppActions:
         backgrounds say the camera's exposure moved between them (exif_exposure.py,
         exposure_estimate.py), as the capture report says it."""
         from lirm.engine.capture.exif_exposure import exposure_note
-        from lirm.engine.capture.exposure_match import ESTIMATED_EXPOSURE_KEY, estimated_exposure_note, white_balance_note
+        from lirm.engine.capture.exposure_match import estimated_exposure_note, white_balance_note
 
         capture = Capture.open(capture_dir)
         note = exposure_note([r.exposure_stops for r in capture.records])
@@ -175,8 +175,8 @@ class AppActions:
         if estimated and estimated[1]:
             self.state.say(f"exposure, from the photos' backgrounds: {estimated[0]}", "warning")
         balance = white_balance_note(capture)
-        if balance and capture.settings.get(ESTIMATED_EXPOSURE_KEY, {}).get("colour_matched"):
-            self.state.say(f"white balance, from the photos' backgrounds: {balance}")
+        if balance and balance[1]:  # said only where the photos were balanced for it
+            self.state.say(f"white balance, from the photos' backgrounds: {balance[0]}")
 
     def _say_skipped(self, skipped: list[tuple[str, str]], inputs: str) -> None:
         """After an import: which files it did not take, and why (the Capture panel lists them all)."""

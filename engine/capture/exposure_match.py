@@ -143,18 +143,19 @@ def estimated_exposure_note(capture) -> tuple[str, bool] | None:
     return text, warn
 
 
-def white_balance_note(capture) -> str | None:
+def white_balance_note(capture) -> tuple[str, bool] | None:
     """What the capture report (and the app, after an import) says of the photos' white balance as
-    their shared backgrounds gave it (exposure_estimate.py); None when nothing was estimated, or when
-    the backgrounds disagree (nothing was matched by them, and the estimate says why)."""
+    their shared backgrounds gave it (exposure_estimate.py), and whether the working copies were
+    balanced for it; None when nothing was estimated, or when the backgrounds disagree (nothing was
+    matched by them, and the estimate says why)."""
     estimated = capture.settings.get(ESTIMATED_EXPOSURE_KEY)
     if not estimated or not estimated.get("colour_stops") or estimated.get("residual_stops", 0.0) > MAX_RESIDUAL_STOPS:
         return None
     spread = colour_spread(estimated["colour_stops"])
     text = f"{len(estimated['colour_stops'])} photos, {100 * (2 ** spread - 1):.0f}% apart in one colour at most"
     if estimated.get("colour_matched"):
-        return text + " (the camera balanced each shot on its own); the working copies are balanced as the shoot's average"
-    return text + f" (within the estimate's own {100 * (2 ** COLOUR_NOISE_STOPS - 1):.0f}%: one white balance, nothing matched)"
+        return text + " (the camera balanced each shot on its own); the working copies are balanced as the shoot's average", True
+    return text + f" (within the estimate's own {100 * (2 ** COLOUR_NOISE_STOPS - 1):.0f}%: one white balance, nothing matched)", False
 
 
 def capture_response(capture) -> str:

@@ -104,7 +104,7 @@ def _exposure_line(capture) -> str | None:
         lines.append(f"  exposure from the photos' shared backgrounds (their EXIF does not say): {estimated[0]}")
     balance = white_balance_note(capture)
     if balance:
-        lines.append(f"  white balance from the photos' shared backgrounds: {balance}")
+        lines.append(f"  white balance from the photos' shared backgrounds: {balance[0]}")
     return "\n".join(lines) or None
 
 

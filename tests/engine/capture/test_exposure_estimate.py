@@ -186,7 +186,8 @@ def test_what_the_capture_says_and_matches_by_an_estimate(lego_capture, tmp_path
     assert gains[frames[0]][2] / gains[frames[0]][0] == pytest.approx(2.0 ** 0.2)
     assert gains[frames[1]][0] / gains[frames[1]][2] == pytest.approx(2.0 ** 0.2)
     assert np.allclose(gains[frames[2]], 1.0)
-    assert "15% apart in one colour at most" in white_balance_note(capture) and "balanced as the shoot's average" in white_balance_note(capture)
+    text, balanced = white_balance_note(capture)
+    assert "15% apart in one colour at most" in text and "balanced as the shoot's average" in text and balanced
     capture.settings[ESTIMATED_EXPOSURE_KEY].update(colour_matched=False)
     assert np.allclose(capture_exposure_gains(capture)[frames[0]], 1.0)
     same = {f: 0.01 * k for k, f in enumerate(frames)}
@@ -194,7 +195,8 @@ def test_what_the_capture_says_and_matches_by_an_estimate(lego_capture, tmp_path
     text, warn = estimated_exposure_note(capture)
     assert not warn and "one exposure, nothing matched" in text and capture_exposure_gains(capture) is None
     capture.settings[ESTIMATED_EXPOSURE_KEY].update(colour_stops={f: [0.01, 0.0, -0.01] for f in frames}, colour_matched=False)
-    assert "one white balance, nothing matched" in white_balance_note(capture)
+    text, balanced = white_balance_note(capture)
+    assert "one white balance, nothing matched" in text and not balanced
     capture.settings[ESTIMATED_EXPOSURE_KEY] = {"stops": apart, "pairs": 20, "residual_stops": 2 * MAX_RESIDUAL_STOPS,
                                                 "matched": False}
     text, warn = estimated_exposure_note(capture)
