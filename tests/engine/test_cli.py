@@ -239,6 +239,9 @@ def test_demo_photographs_and_captures_a_builtin_object(tmp_path):
     relit = cv2.imread(str(tmp_path / "demo" / "relit.png"))
     assert relit is not None and relit.shape[:2] == (4 * 192, 4 * 192) and relit.std() > 10  # 2 assets x 2 HDRIs, 4 sides
     assert "rows, top to bottom: original mug under studio; exported asset under studio" in out
+    # ... and scores it against the original, placed in the shoot's frame (`lirm bench relight`'s figures).
+    demo_psnr = float(re.search(r"relit against the original from 8 new views .*?: ([\d.]+) dB \(studio", out).group(1))
+    assert 10.0 < demo_psnr < 60.0 and float(re.search(r"silhouette IoU ([\d.]+)", out).group(1)) > 0.85, out
     # The refinement inverse-renders the materials, so the photos' shading is not baked into the albedo:
     # relit, no side of the asset is much darker than the original's (a plain radiance fit's label side,
     # in the sky's shadow in the photos, came out at 0.38-0.47 of the original's brightness; with the
