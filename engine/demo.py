@@ -70,10 +70,7 @@ class DemoResult:
     trained: bool = False
     relit: Path | None = None
     relit_rows: list[str] = field(default_factory=list)
-    # The relighting test of the asset against the original (bench/demo_relight_bench.py): environment ->
-    # PSNR-L / PSNR-H / SSIM, and the placement's silhouette IoU.
-    relit_scores: dict[str, dict[str, float]] = field(default_factory=dict)
-    relit_placement_iou: float | None = None
+    relit_test: object | None = None  # the relighting test of the asset against the original (DemoRelightResult)
 
 
 def run_demo(out_dir: str | Path, config: DemoConfig = DemoConfig(), progress: Callable[[str], None] | None = None) -> DemoResult:
@@ -125,7 +122,7 @@ def run_demo(out_dir: str | Path, config: DemoConfig = DemoConfig(), progress: C
     say("scoring the relit asset against the original (the relighting test, `lirm bench relight`)")
     scored = run_demo_relight_bench(out_dir, asset, config.relight_environments)
     return DemoResult(out_dir, overview, photos, capture_dir, accuracy, asset, source.description, source.trained, relit, rows,
-                      scored.scores, scored.alignment_iou)
+                      scored)
 
 
 def _relight(asset: Path, path: Path, config: DemoConfig) -> tuple[Path, list[str]]:

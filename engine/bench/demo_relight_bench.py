@@ -36,6 +36,10 @@ class DemoRelightResult:
     scores: dict[str, dict[str, float]] = field(default_factory=dict)  # environment -> metric -> mean over views
     picture: Path | None = None
 
+    def mean(self, key: str) -> float:
+        """A metric's mean over the environments."""
+        return float(np.mean([s[key] for s in self.scores.values()]))
+
     def report(self) -> str:
         lines = [f"{self.asset} relit beside the original {self.object_name} ({self.views} views per environment, "
                  f"none of them the photos'):",
@@ -44,8 +48,7 @@ class DemoRelightResult:
             lines.append(f"  under {name}: PSNR-L {s['relight_psnr_l']:.2f} dB, PSNR-H {s['relight_psnr_h']:.2f} dB, "
                          f"SSIM {s['relight_ssim']:.3f}")
         if len(self.scores) > 1:
-            mean = {k: float(np.mean([s[k] for s in self.scores.values()])) for k in ("relight_psnr_l", "relight_psnr_h")}
-            lines.append(f"  mean: PSNR-L {mean['relight_psnr_l']:.2f} dB, PSNR-H {mean['relight_psnr_h']:.2f} dB")
+            lines.append(f"  mean: PSNR-L {self.mean('relight_psnr_l'):.2f} dB, PSNR-H {self.mean('relight_psnr_h'):.2f} dB")
         if self.picture is not None:
             lines.append(f"  picture (truth above, asset below): {self.picture}")
         return "\n".join(lines)
@@ -59,27 +62,18 @@ def shoot_object(truth_file: dict) -> tuple[str, int]:
     return str(truth_file.get("object", default.object_name)), int(truth_file.get("object_seed", default.seed))
 
 
-def placement_in_shoot(demo_out: Path, asset: Path) -> np.ndarray:
+def placement_in_shoot(demo_out: Path, asset: Path, truth_file: dict) -> np.ndarray:
     """The 4x4 similarity taking the exported file's frame to the shoot's."""
-    from lirm.engine.capture.alignment import similarity_align
     from lirm.engine.capture.capture_folder import Capture
-    from lirm.engine.cameras import Camera
     from lirm.engine.export.glb_placement import read_placement
+
+    from .shoot_frame import shoot_similarity
 
     placement = read_placement(asset)
     if placement is None:
         raise LirmUserError(f"{asset}: it does not say where it was placed (not a `lirm export` .glb); "
                             f"export the demo's capture with `lirm export {demo_out / 'capture'} -o ASSET.glb`")
-    capture = Capture.open(demo_out / "capture")
-    truth_file = json.loads((demo_out / "truth" / "transforms.json").read_text())
-    truth_cameras = {Path(f["file_path"]).stem: Camera.from_dict(f) for f in truth_file["frames"]}
-    pairs = [(capture.cameras[fid].moved_by(placement).center, truth_cameras[state.record.original.stem].center)
-             for fid, state in capture.frames.items()
-             if fid in capture.cameras and state.record.original.stem in truth_cameras]
-    if len(pairs) < 3:
-        raise LirmUserError(f"{demo_out}: only {len(pairs)} of the capture's posed photos are in truth/transforms.json; "
-                            f"the asset cannot be placed in the shoot's frame")
-    scale, rotation, translation = similarity_align(np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs]))
+    scale, rotation, translation = shoot_similarity(Capture.open(demo_out / "capture"), truth_file, moved_by=placement)
     matrix = np.eye(4)
     matrix[:3, :3] = scale * rotation
     matrix[:3, 3] = translation
@@ -107,7 +101,6 @@ def run_demo_relight_bench(demo_out: str | Path, asset: str | Path | None = None
     from lirm.engine.assets.asset_source import resolve_asset
     from lirm.engine.assets.environment_files import resolve_environment
     from lirm.engine.assets.model_loader import load_model
-    from lirm.engine.cameras import Camera
     from lirm.engine.demo import DemoConfig
     from lirm.engine.evaluation.relighting import RELIGHT_SETTINGS, relight_metrics, render_relight_truth
     from lirm.engine.evaluation.relight_pictures import write_relight_picture
@@ -126,7 +119,7 @@ def run_demo_relight_bench(demo_out: str | Path, asset: str | Path | None = None
     object_name, seed = shoot_object(truth_file)
     original = resolve_asset(object_name, seed=seed)
     exported = load_model(asset)
-    placed = placement_in_shoot(demo_out, asset)
+    placed = placement_in_shoot(demo_out, asset, truth_file)
     names = environments or demo.relight_environments
     lights = [resolve_environment(name, width=demo.environment_width // 2) for name in names]
     cameras = relight_cameras(views, size)
@@ -137,7 +130,7 @@ def run_demo_relight_bench(demo_out: str | Path, asset: str | Path | None = None
     try:
         scene = renderer.upload(exported.meshes, placed)
         try:
-            result.alignment_iou = _placement_iou(renderer, scene, demo_out, truth_file, Camera)
+            result.alignment_iou = _placement_iou(renderer, scene, demo_out, truth_file)
             for environment in lights:
                 exposure = auto_exposure_ev(environment)
                 truth = render_relight_truth(renderer, original.meshes, normalizing_transform(original.bounds), cameras,
@@ -166,8 +159,10 @@ def run_demo_relight_bench(demo_out: str | Path, asset: str | Path | None = None
     return result
 
 
-def _placement_iou(renderer, scene, demo_out: Path, truth_file: dict, camera_type) -> float:
+def _placement_iou(renderer, scene, demo_out: Path, truth_file: dict) -> float:
     """The placed asset's silhouette against the shoot's true masks, from the shoot's own cameras."""
+    from lirm.engine.cameras import Camera
+    from lirm.engine.capture.masks import mask_iou
     from lirm.renderer.pbr_renderer import RenderSettings
 
     lighting = renderer.prepare_lighting(_grey_environment())
@@ -177,14 +172,11 @@ def _placement_iou(renderer, scene, demo_out: Path, truth_file: dict, camera_typ
             mask_path = demo_out / "truth" / "masks" / f"{Path(frame['file_path']).stem}.png"
             if not mask_path.is_file():
                 continue
-            camera = camera_type.from_dict(frame).scaled(ALIGNMENT_SCALE)
+            camera = Camera.from_dict(frame).scaled(ALIGNMENT_SCALE)
             out = renderer.render_view(scene, camera, lighting, RenderSettings(show_environment=False, supersample=1))
-            true_mask = cv2.imread(str(mask_path), cv2.IMREAD_GRAYSCALE).astype(np.float32) / 255.0
+            true_mask = cv2.imread(str(mask_path), cv2.IMREAD_GRAYSCALE).astype(np.float32)
             true_mask = cv2.resize(true_mask, (camera.width, camera.height), interpolation=cv2.INTER_AREA)
-            a, b = out.mask > 0.5, true_mask > 0.5
-            union = np.logical_or(a, b).sum()
-            if union:
-                ious.append(np.logical_and(a, b).sum() / union)
+            ious.append(mask_iou(out.mask * 255.0, true_mask))
     finally:
         lighting.maps.release()
     return float(np.mean(ious)) if ious else float("nan")

@@ -8,14 +8,13 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 
 from lirm.engine.assets.environment_files import resolve_environment
-from lirm.engine.cameras import Camera
-from lirm.engine.capture.alignment import similarity_align
 from lirm.engine.capture.capture_folder import Capture
 from lirm.engine.errors import LirmUserError
 from lirm.engine.evaluation.lighting_accuracy import ELEVATION_BANDS, LightingAccuracy, chromaticity, compare_lighting
+
+from .shoot_frame import shoot_similarity
 
 
 @dataclass
@@ -58,11 +57,7 @@ def run_lighting_bench(demo_out: str | Path, environment: str | None = None, ref
     truth_file = json.loads((demo_out / "truth" / "transforms.json").read_text())
     environment_override = environment
     environment = environment or truth_file.get("environment", "sky")
-    truth_cameras = {Path(f["file_path"]).stem: Camera.from_dict(f) for f in truth_file["frames"]}
-    pairs = [(capture.cameras[fid].center, truth_cameras[state.record.original.stem].center)
-             for fid, state in capture.frames.items()
-             if fid in capture.cameras and state.record.original.stem in truth_cameras]
-    _, rotation, _ = similarity_align(np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs]))
+    _, rotation, _ = shoot_similarity(capture, truth_file)
     source = "the backgrounds' estimate (as photographed)"
     if refined:
         fitted = refined_lighting_file(capture)

@@ -258,18 +258,9 @@ def _attach_floor_evidence(views: dict[str, "_View"], images: Mapping[str, np.nd
         if cfg.floor_agreement_threshold > 0:
             agreement = floor_agreement(work.camera, work.image, others, plane, sight=sight)
             pixels = np.argwhere(np.nan_to_num(agreement, nan=-1.0) > cfg.floor_agreement_threshold)
-            work.on_floor = (pixels, _floor_points(work.camera, pixels, plane))
+            work.on_floor = (pixels, sight.points[pixels[:, 0], pixels[:, 1]])
         size = (view.seed.camera.width, view.seed.camera.height)
         view.seed.off_floor = cv2.resize(work.off_floor.astype(np.float32), size, interpolation=cv2.INTER_AREA) > 0.5
-
-
-def _floor_points(camera: Camera, pixels: np.ndarray, plane: tuple[np.ndarray, float]) -> np.ndarray:
-    """(N, 3): where the rays of `pixels` ((N, 2) rows and columns) meet the plane."""
-    normal, offset = np.asarray(plane[0], dtype=np.float64), float(plane[1])
-    origins, directions = camera.pixel_rays()
-    o, d = origins[pixels[:, 0], pixels[:, 1]], directions[pixels[:, 0], pixels[:, 1]]
-    t = (offset - o @ normal) / np.where(np.abs(d @ normal) < 1e-9, 1e-9, d @ normal)
-    return o + t[:, None] * d
 
 
 # Hull voxels this many voxels above the floor (after cut_below_plane's layer) count as its base.

@@ -48,7 +48,7 @@ def floor_disagreement(camera: Camera, image: np.ndarray, others: Sequence[tuple
     origin, or no other view sees that point. Both images are blurred by `blur_px` (this image's
     pixels; the others should be at about the same scale). `sight`: floor_sight's result for the
     same arguments, when the caller also wants the agreement."""
-    own, meets, seen_by_others = sight or floor_sight(camera, image, others, plane, reach, blur_px)
+    own, meets, _, seen_by_others = sight or floor_sight(camera, image, others, plane, reach, blur_px)
     best = np.full(meets.shape, np.inf, np.float32)
     for seen, valid in seen_by_others:
         difference = np.abs(own - seen).max(axis=-1)
@@ -78,7 +78,7 @@ def floor_agreement(camera: Camera, image: np.ndarray, others: Sequence[tuple[Ca
     pattern matches at its floor point and not beside it), and the object's base stands within a
     pixel's parallax of the floor (the caller keeps away from where the object meets the floor).
     NaN also where the floor is not met or too few others see it."""
-    own, meets, seen_by_others = sight or floor_sight(camera, image, others, plane, reach, blur_px)
+    own, meets, _, seen_by_others = sight or floor_sight(camera, image, others, plane, reach, blur_px)
     size = (2 * window_px + 1, 2 * window_px + 1)
     box = lambda a: cv2.blur(a, size, borderType=cv2.BORDER_REFLECT)  # noqa: E731
     own_mean = box(own)
@@ -113,6 +113,7 @@ class FloorSight(NamedTuple):
 
     own: np.ndarray  # (H, W, 3) float32: the photo, blurred
     meets: np.ndarray  # (H, W) bool: where its rays meet the floor within reach
+    points: np.ndarray  # (H, W, 3): where each pixel's ray meets the floor's plane
     seen_by_others: list  # per other view: ((H, W, 3) what it sees at those floor points, (H, W) where it sees them)
 
 
@@ -141,7 +142,7 @@ def floor_sight(camera: Camera, image: np.ndarray, others: Sequence[tuple[Camera
         # Exposure: scale the other's colours to this photo's on what both see (mostly floor).
         gain = np.median(own[valid], axis=0) / np.maximum(np.median(seen[valid], axis=0), 1.0)
         seen_by_others.append((seen * gain, valid))
-    return FloorSight(own, meets, seen_by_others)
+    return FloorSight(own, meets, points, seen_by_others)
 
 
 def off_floor_evidence(disagreement: np.ndarray, threshold: float, specks_px: int = 1) -> np.ndarray:

@@ -55,12 +55,12 @@ def run(args: argparse.Namespace) -> int:
     print(f"  exported asset: {result.asset}")
     if result.relit:
         print(f"  relit: {result.relit} (rows, top to bottom: {'; '.join(result.relit_rows)})")
-    if result.relit_scores:
-        each = ", ".join(f"{name} {s['relight_psnr_l']:.2f}" for name, s in result.relit_scores.items())
-        mean = sum(s["relight_psnr_l"] for s in result.relit_scores.values()) / len(result.relit_scores)
-        print(f"  relit against the original from 8 new views (the relighting test, PSNR-L after a per-channel scale): "
-              f"{mean:.2f} dB ({each}); placed by the camera centres, silhouette IoU {result.relit_placement_iou:.3f}; "
-              f"details: `lirm bench relight {result.out_dir} --picture F.png`")
+    test = result.relit_test
+    if test is not None and test.scores:
+        each = ", ".join(f"{name} {s['relight_psnr_l']:.2f}" for name, s in test.scores.items())
+        print(f"  relit against the original from {test.views} new views (the relighting test, PSNR-L after a per-channel "
+              f"scale): {test.mean('relight_psnr_l'):.2f} dB ({each}); placed by the camera centres, silhouette IoU "
+              f"{test.alignment_iou:.3f}; details: `lirm bench relight {result.out_dir} --picture F.png`")
     if not result.trained:
         print("WARNING: no trained weights ship yet: the reconstruction and asset come from UNTRAINED weights and "
               "do not look like the mug", file=sys.stderr)
