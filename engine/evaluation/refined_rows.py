@@ -73,8 +73,7 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
     sets = obj.protocol.input_sets[:updates]
     views = refine_inputs(obj, [i for s in sets for i in s])
     start = time.perf_counter()
-    hull = initial_fields.masks_hull(views, refine.hull_resolution, model.config.radius)
-    footprint_hull = initial_fields.masks_hull(views, refine.hull_resolution, model.config.radius, footprint=True)
+    hull, footprint_hull, _ = initial_fields.views_hulls(views, refine, model.config.radius)
     grid = initial_fields.views_sampling_grid(views, refine, model.config.radius, footprint_hull)
     resolution = refine.plane_resolutions[0]
     chosen = init

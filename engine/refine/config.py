@@ -34,6 +34,9 @@ class LossWeights:
     # Below the lowest surface the photos see, the SDF at least the height under it (unseen_floor.py):
     # the wedge the masks' hull leaves under an object photographed from above (README: its worth).
     floor: float = 0.5
+    # The SDF held positive outside the sampling grid, where no render looks (outside_bounds.py): the
+    # shared planes otherwise grow surfaces there, a lid over a carved opening (README).
+    outside_bounds: float = 0.5
     # Inverse rendering (with RefineConfig.inverse_rendering and a lighting estimate): the PBR materials
     # shaded under the capture's lighting against the photo, the lighting held to what the photos'
     # backgrounds saw and smooth where they saw nothing.
@@ -97,6 +100,9 @@ class RefineConfig:
     eikonal_points: int = 1024
     hull_resolution: int = 64  # the visual hull of the masks bounds where samples are taken
     hull_dilation_voxels: int = 2  # slack for masks and poses that are not exact (real captures)
+    # The hull carved further where the photos see through it (photo_carving.py: a mug's opening, which
+    # every mask covers); README, "What the photos see through the hull".
+    photo_carving: bool = True
     hull_init_steps: int = 150  # `--init hull`: steps regressing the field to the hull before the photometric fit
     best_every: int = 20  # steps between checks of the running loss for the best state so far
     seed: int = 0

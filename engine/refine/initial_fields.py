@@ -15,6 +15,7 @@ from lirm.engine.model.occupancy_grid import OccupancyGrid
 
 from .config import RefineConfig
 from .objective import batch_loss, sdf_gradients
+from .photo_carving import PhotoCarving, photo_carve_occupancy
 from .ray_rendering import render_ray_batch
 from .refinable_field import RefinableField, fresh_field
 from .refine_views import RefineViews
@@ -29,6 +30,29 @@ def masks_hull(views: RefineViews, resolution: int, radius: float, footprint: bo
     `footprint`: each voxel kept when any part of it may touch every mask, not only its centre."""
     hull = CarvedHull(image_size=views.images.shape[1], resolution=resolution, radius=radius, footprint=footprint)
     return hull.update_known(hull.initial_state(1), views.cameras, list(views.images), [m > 0.5 for m in views.masks])
+
+
+def views_hulls(views: RefineViews, config: RefineConfig, radius: float) -> tuple[CarvedHullState, CarvedHullState, PhotoCarving | None]:
+    """The masks' hull carved by each voxel's centre and by its footprint, both carved further where
+    the photos see through them (`config.photo_carving`, photo_carving.py: a mug's opening), and what
+    that carving did (None when off)."""
+    hull = masks_hull(views, config.hull_resolution, radius)
+    footprint_hull = masks_hull(views, config.hull_resolution, radius, footprint=True)
+    if not config.photo_carving or hull.occupancy is None or not hull.occupancy.any():
+        return hull, footprint_hull, None
+    carving = photo_carve_occupancy(hull.occupancy, radius, views.cameras, views.images, views.masks)
+    removed = hull.occupancy & ~carving.occupancy
+    return _recoloured(hull, views, radius, ~removed), _recoloured(footprint_hull, views, radius, ~removed, footprint=True), carving
+
+
+def _recoloured(state: CarvedHullState, views: RefineViews, radius: float, keep: np.ndarray,
+                footprint: bool = False) -> CarvedHullState:
+    """`state` with only the voxels in `keep`, coloured again from the views (the surface it shows has moved)."""
+    resolution = state.occupancy.shape[0]
+    hull = CarvedHull(image_size=views.images.shape[1], resolution=resolution, radius=radius, footprint=footprint)
+    start = hull.initial_state(1)
+    start.occupancy = state.occupancy & keep
+    return hull.update_known(start, views.cameras, list(views.images), [m > 0.5 for m in views.masks])
 
 
 def sampling_grid(hull: CarvedHullState, radius: float, dilation_voxels: int, device: str | torch.device = "cpu") -> OccupancyGrid | None:

@@ -14,6 +14,7 @@ from lirm.engine.lighting.split_sum_shading import shade
 
 from .albedo_smoothness import albedo_difference
 from .config import CURVATURE_STEP, LossWeights
+from .outside_bounds import OutsideBounds
 from .ray_rendering import RayBatchRender
 from .shared_materials import ALBEDO_SIGMA, shared_albedo_loss, shared_material_loss
 from .unshaded_albedo import normal_explained_albedo
@@ -41,14 +42,17 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
                material_anchor: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]] | None = None,
                volume_points: torch.Tensor | None = None, floor=None,
                floor_points: torch.Tensor | None = None,
-               pairs: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, float]]:
+               pairs: torch.Tensor | None = None,
+               outside_points: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, float]]:
     """With `lighting` (a PanoramaLighting) and the rays' `directions`, the inverse-rendering terms too.
     `material_anchor` (points -> roughness, metallic): what the material prior holds the field to at
     the surface points, e.g. the LIRM prediction the fit started from; without it the prior is the
     constant roughness 0.5 and metallic 0 over each ray. `volume_points`: (K, 3) points spread over
     where the object may be, for the volume term. `floor` (unseen_floor.UnseenFloor) and its
     `floor_points` below it: the floor term. `pairs`: (P, 2) batch positions of nearby rays of one
-    view, for the albedo smoothness term (with the inverse rendering)."""
+    view, for the albedo smoothness term (with the inverse rendering). `outside_points`: (K, 4) points
+    outside the sampling grid with the SDF's lower bound at each (outside_bounds.py), for the term
+    that keeps the field empty where the fit never renders."""
     terms: dict[str, torch.Tensor] = {}
     terms["colour"] = (render.colour - colours).abs().mean()
     if lighting is not None:
@@ -112,6 +116,8 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
         terms["volume"] = torch.sigmoid(-field.sdf(volume_points[None])[0] / band).mean()
     if weights.floor and floor is not None and floor_points is not None:
         terms["floor"] = floor.loss(field, floor_points)
+    if weights.outside_bounds and outside_points is not None:
+        terms["outside_bounds"] = OutsideBounds.loss(field, outside_points)
     if weights.plane_tv:
         planes = field.planes
         terms["plane_tv"] = ((planes[..., 1:, :] - planes[..., :-1, :]) ** 2).mean() + ((planes[..., 1:] - planes[..., :-1]) ** 2).mean()

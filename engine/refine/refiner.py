@@ -21,6 +21,7 @@ from lirm.engine.model.occupancy_grid import OccupancyGrid
 
 from .config import RefineConfig
 from .objective import batch_loss
+from .outside_bounds import OutsideBounds
 from .ray_rendering import render_ray_batch, with_sdf_normals
 from .refinable_field import RefinableField
 from .refine_views import RefineViews
@@ -116,6 +117,7 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
     resolutions = config.plane_resolutions
     anchor = _material_anchor(refinable.frozen_field(), device) if start_has_materials and config.anchor_materials else None
     floor = UnseenFloor(grid, refinable.config.radius) if config.losses.floor else None
+    outside = OutsideBounds(grid) if config.losses.outside_bounds and grid is not None else None
     refinable.resample_planes(resolutions[0])
     optimiser = _optimiser(refinable, config, lighting)
     stage = 0
@@ -179,7 +181,7 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
                                      shading, directions, anchor,
                                      _volume_points(grid, config, generator, device) if config.losses.volume else None,
                                      floor, floor.points_below(config.eikonal_points, generator, device) if carve else None,
-                                     pairs)
+                                     pairs, outside.points(config.eikonal_points // 2, generator, device) if outside else None)
             optimiser.zero_grad(set_to_none=True)
             loss.backward()
             optimiser.step()
