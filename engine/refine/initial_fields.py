@@ -40,8 +40,10 @@ def views_hulls(views: RefineViews, config: RefineConfig, radius: float) -> tupl
     footprint_hull = masks_hull(views, config.hull_resolution, radius, footprint=True)
     if not config.photo_carving or hull.occupancy is None or not hull.occupancy.any():
         return hull, footprint_hull, None
-    carving = photo_carve_occupancy(hull.occupancy, radius, views.cameras, views.images, views.masks)
-    removed = hull.occupancy & ~carving.occupancy
+    # Carved from the footprint hull, the fatter one: carved from the centres' hull, the footprint's
+    # extra layer over a mug's opening stayed in the sampling bounds, and the fit grew a lid in it.
+    carving = photo_carve_occupancy(footprint_hull.occupancy, radius, views.cameras, views.images, views.masks)
+    removed = footprint_hull.occupancy & ~carving.occupancy
     return _recoloured(hull, views, radius, ~removed), _recoloured(footprint_hull, views, radius, ~removed, footprint=True), carving
 
 

@@ -50,4 +50,9 @@ class OutsideBounds:
     @staticmethod
     def loss(field, points: torch.Tensor) -> torch.Tensor:
         """Mean shortfall of the SDF below its lower bound at `points` (from `points`)."""
-        return torch.relu(points[:, 3] - field.sdf(points[None, :, :3])[0]).mean()
+        return OutsideBounds.shortfall(points[:, 3], field.sdf(points[None, :, :3])[0])
+
+    @staticmethod
+    def shortfall(bounds: torch.Tensor, sdf: torch.Tensor) -> torch.Tensor:
+        """Mean of how far each SDF value falls below its bound."""
+        return torch.relu(bounds - sdf).mean()

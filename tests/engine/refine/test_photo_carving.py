@@ -130,17 +130,19 @@ def test_a_plain_cup_gives_no_evidence_and_keeps_its_lid():
 
 def test_the_refinement_starts_from_the_carved_hulls(speckled_cup):
     """`views_hulls` (what `lirm refine` and the bench start from): both hulls lose what the photos
-    see through, the footprint hull (the sampling bounds) the same voxels; the surface the carving
-    exposed takes the photos' colours again. Off, the masks' hulls as they were."""
+    see through in the footprint hull (the sampling bounds), the same voxels; the surface the carving
+    exposed takes the photos' colours again. Off (the default: README), the masks' hulls as they were."""
     cameras, images, masks, hull, _ = speckled_cup
     views = RefineViews.build([f"v{i}" for i in range(len(cameras))], cameras, images, masks)
-    config = replace(RefineConfig(), hull_resolution=RESOLUTION)
+    config = replace(RefineConfig(), hull_resolution=RESOLUTION, photo_carving=True)
     plain, plain_footprint, none = initial_fields.views_hulls(views, replace(config, photo_carving=False), RADIUS)
     assert none is None and np.array_equal(plain.occupancy, hull)
     carved, carved_footprint, carving = initial_fields.views_hulls(views, config, RADIUS)
-    removed = hull & ~carved.occupancy
+    # Carved from the footprint hull (the fatter: its layer over the opening goes too), the same voxels from both.
+    removed = plain_footprint.occupancy & ~carved_footprint.occupancy
     assert carving.carved_voxels == removed.sum() > 100
-    assert np.array_equal(plain_footprint.occupancy & ~removed, carved_footprint.occupancy)
+    assert np.array_equal(hull & ~removed, carved.occupancy)
+    assert (hull & removed).sum() > 100
     # The opening's new floor is coloured (the lid's colour sums went with it).
     floor = np.argwhere(carved.occupancy & ndimage.binary_dilation(removed) & ~removed)
     assert (carved.weight[tuple(floor.T)] > 0).mean() > 0.5
