@@ -7,7 +7,7 @@ Yet a photo that looks into the opening sees the inside, and its neighbours see 
 point where its true depth puts it, not where the lid does. So, per pixel of each view: sweep the
 depth along its ray from where it enters the hull to where it leaves, and correlate the patch round
 the pixel with what the neighbours see at each depth (zero-mean normalised cross-correlation of a
-small luminance patch, the patch kept parallel to the hull's surface). Where the best depth lies
+small luminance patch, on the camera's fronto-parallel planes). Where the best depth lies
 clearly below the hull's surface, and matches clearly better than the surface itself does, the
 hull between is empty space; a voxel goes when rays of at least two views say so and no view's
 match lies in it.
@@ -23,6 +23,7 @@ body) down toward the true surface.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import cv2
@@ -73,8 +74,6 @@ def photo_carve_occupancy(occupancy: np.ndarray, radius: float, cameras: list[Ca
     """The hull `occupancy` ((R, R, R) bool over [-radius, radius]^3) with the voxels carved that the
     photos see through. `images`: (V, H, W, 3) sRGB in [0, 1] (the object on any fill); `masks`:
     (V, H, W) in [0, 1]; `cameras`: each view's."""
-    import time
-
     start = time.perf_counter()
     occupancy = np.asarray(occupancy, bool)
     resolution = occupancy.shape[0]
