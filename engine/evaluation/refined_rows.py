@@ -73,7 +73,8 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
     sets = obj.protocol.input_sets[:updates]
     views = refine_inputs(obj, [i for s in sets for i in s])
     start = time.perf_counter()
-    hull, footprint_hull, _ = initial_fields.views_hulls(views, refine, model.config.radius)
+    hulls = initial_fields.views_hulls(views, refine, model.config.radius)
+    hull, footprint_hull = hulls.centres, hulls.footprint
     grid = initial_fields.views_sampling_grid(views, refine, model.config.radius, footprint_hull)
     resolution = refine.plane_resolutions[0]
     chosen = init

@@ -156,9 +156,9 @@ def _refine_locked(capture_dir, source: ModelSource, config: RefineConfig, init:
     views = RefineViews.from_prepared([views_by_frame[f] for f in fitted])
     notes: list[str] = []
     radius = source.model.config.radius
-    hull, footprint_hull, carving = initial_fields.views_hulls(views, config, radius)
-    if carving is not None and carving.carved_voxels:
-        notes.append(carving.sentence())
+    hulls = initial_fields.views_hulls(views, config, radius)
+    hull, footprint_hull = hulls.centres, hulls.footprint
+    notes.extend(hulls.sentences())
     grid = initial_fields.views_sampling_grid(views, config, radius, footprint_hull)
     if grid is None:
         notes.append("the masks' visual hull is empty (masks or poses disagree): sampling the whole bounding sphere")

@@ -112,6 +112,9 @@ class RefineConfig:
     # where they stop lies farther from the true inside than the lid did (README, "What the photos see
     # through the hull").
     photo_carving: bool = False
+    # With `photo_carving`: an opening whose bottom the photos did not see continued down to a floor
+    # a wall's thickness above the lowest surface they saw (unseen_hollow.py: a mug's inside).
+    hollow_openings: bool = True
     hull_init_steps: int = 150  # `--init hull`: steps regressing the field to the hull before the photometric fit
     best_every: int = 20  # steps between checks of the running loss for the best state so far
     seed: int = 0

@@ -4,6 +4,8 @@ that bounds where every refinement samples."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import torch
 from scipy import ndimage
@@ -19,6 +21,7 @@ from .photo_carving import PhotoCarving, photo_carve_occupancy
 from .ray_rendering import render_ray_batch
 from .refinable_field import RefinableField, fresh_field
 from .refine_views import RefineViews
+from .unseen_hollow import UnseenHollow, hollow_below_opening
 
 INITS = ("lirm", "hull", "hull-lirm", "scratch")
 # "auto" (`lirm refine`'s default on a capture with no refinement yet): whichever of LIRM and
@@ -32,19 +35,40 @@ def masks_hull(views: RefineViews, resolution: int, radius: float, footprint: bo
     return hull.update_known(hull.initial_state(1), views.cameras, list(views.images), [m > 0.5 for m in views.masks])
 
 
-def views_hulls(views: RefineViews, config: RefineConfig, radius: float) -> tuple[CarvedHullState, CarvedHullState, PhotoCarving | None]:
+@dataclass
+class ViewsHulls:
+    """The refinement's hulls of a set of views, and what the photos changed in them."""
+
+    centres: CarvedHullState  # each voxel kept when its centre projects into every mask (the start)
+    footprint: CarvedHullState  # ... when any part of it may (the sampling bounds: thin parts kept)
+    carving: PhotoCarving | None = None  # where the photos see through them (None: not asked for)
+    hollow: UnseenHollow | None = None  # the opening continued down (None: not asked for, or nothing carved)
+
+    def sentences(self) -> list[str]:
+        """What the carving and the hollow did, for the refinement's notes."""
+        said = [self.carving.sentence()] if self.carving is not None and self.carving.carved_voxels else []
+        return said + ([self.hollow.sentence()] if self.hollow is not None else [])
+
+
+def views_hulls(views: RefineViews, config: RefineConfig, radius: float) -> ViewsHulls:
     """The masks' hull carved by each voxel's centre and by its footprint, both carved further where
-    the photos see through them (`config.photo_carving`, photo_carving.py: a mug's opening), and what
-    that carving did (None when off)."""
+    the photos see through them (`config.photo_carving`, photo_carving.py: a mug's opening) and below
+    an opening whose bottom they did not see (`config.hollow_openings`, unseen_hollow.py)."""
     hull = masks_hull(views, config.hull_resolution, radius)
     footprint_hull = masks_hull(views, config.hull_resolution, radius, footprint=True)
     if not config.photo_carving or hull.occupancy is None or not hull.occupancy.any():
-        return hull, footprint_hull, None
+        return ViewsHulls(hull, footprint_hull)
     # Carved from the footprint hull, the fatter one: carved from the centres' hull, the footprint's
     # extra layer over a mug's opening stayed in the sampling bounds, and the fit grew a lid in it.
     carving = photo_carve_occupancy(footprint_hull.occupancy, radius, views.cameras, views.images, views.masks)
-    removed = footprint_hull.occupancy & ~carving.occupancy
-    return _recoloured(hull, views, radius, ~removed), _recoloured(footprint_hull, views, radius, ~removed, footprint=True), carving
+    hollow = None
+    kept = carving.occupancy
+    if config.hollow_openings and carving.carved_voxels:
+        hollow = hollow_below_opening(footprint_hull.occupancy, carving)
+        kept = hollow.occupancy
+    removed = footprint_hull.occupancy & ~kept
+    return ViewsHulls(_recoloured(hull, views, radius, ~removed), _recoloured(footprint_hull, views, radius, ~removed, footprint=True),
+                      carving, hollow)
 
 
 def _recoloured(state: CarvedHullState, views: RefineViews, radius: float, keep: np.ndarray,

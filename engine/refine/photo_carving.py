@@ -62,6 +62,9 @@ class PhotoCarving:
     hull_voxels: int
     pixels_seeing_through: int  # rays (all views) whose best match lay below the hull's surface
     seconds: float = 0.0
+    # (R, R, R) bool: voxels holding a point some view matched (the surface the photos saw: an inner
+    # wall seen through the opening, or the hull's own surface confirmed); None when not recorded
+    seen_surface: np.ndarray | None = None
 
     def sentence(self) -> str:
         share = self.carved_voxels / max(self.hull_voxels, 1)
@@ -113,7 +116,8 @@ def photo_carve_occupancy(occupancy: np.ndarray, radius: float, cameras: list[Ca
         loose = np.isin(parts, scraps)
         carve |= loose
         carved &= ~loose
-    return PhotoCarving(carved, int(carve.sum()), int(occupancy.sum()), seeing_through, time.perf_counter() - start)
+    return PhotoCarving(carved, int(carve.sum()), int(occupancy.sum()), seeing_through, time.perf_counter() - start,
+                        carved & (surface_views > 0))
 
 
 def _luminance(image: np.ndarray, blur_px: float) -> np.ndarray:
