@@ -38,9 +38,9 @@ def add_parser(subparsers) -> None:
                              "baked shading (experimental: see the README's relighting figures)")
     parser.add_argument("--carve-openings", action="store_true",
                         help="before the fit, carve the masks' hull where the photos see through it (a cup's "
-                             "opening, which every mask covers; textured insides only): off by default, since the "
-                             "photos see only the opening's upper part and the floor left below it measured no "
-                             "better than the lid (README, 'What the photos see through the hull')")
+                             "opening, which every mask covers; textured insides only), and continue an opening whose "
+                             "bottom no photo saw down to a floor a wall's thickness above the base (README, 'What the "
+                             "photos see through the hull', 'The inside no photo saw')")
     parser.add_argument("--light-lobes", type=int, default=None, metavar="K",
                         help="with --materials: fit K compact lights (spherical Gaussians) beside the lighting panorama, for a "
                              "sun or lamp the photos did not see (default 1; 0: the panorama alone; README: what one was worth)")

@@ -61,14 +61,16 @@ def views_hulls(views: RefineViews, config: RefineConfig, radius: float) -> View
     # Carved from the footprint hull, the fatter one: carved from the centres' hull, the footprint's
     # extra layer over a mug's opening stayed in the sampling bounds, and the fit grew a lid in it.
     carving = photo_carve_occupancy(footprint_hull.occupancy, radius, views.cameras, views.images, views.masks)
+    removed = footprint_hull.occupancy & ~carving.occupancy
     hollow = None
-    kept = carving.occupancy
     if config.hollow_openings and carving.carved_voxels:
         hollow = hollow_below_opening(footprint_hull.occupancy, carving)
-        kept = hollow.occupancy
-    removed = footprint_hull.occupancy & ~kept
-    return ViewsHulls(_recoloured(hull, views, radius, ~removed), _recoloured(footprint_hull, views, radius, ~removed, footprint=True),
-                      carving, hollow)
+    # The start loses the hollow's core only: its walls a voxel thicker than the bounds' (which are a
+    # voxel fatter), as thick as the photos saw them.
+    from_start = removed if hollow is None else removed | hollow.core
+    from_bounds = removed if hollow is None else footprint_hull.occupancy & ~hollow.occupancy
+    return ViewsHulls(_recoloured(hull, views, radius, ~from_start),
+                      _recoloured(footprint_hull, views, radius, ~from_bounds, footprint=True), carving, hollow)
 
 
 def _recoloured(state: CarvedHullState, views: RefineViews, radius: float, keep: np.ndarray,

@@ -50,6 +50,10 @@ class UnseenHollow:
     wall_voxels: float  # the wall thickness kept (voxels); NaN when nothing was measured
     seen_bottom_share: float  # of the carved opening's bottom, the share the photos matched (NaN: none)
     why_not: str = ""  # why nothing was hollowed ("" when something was)
+    # (R, R, R) bool: the hollow less its outermost voxel across, what a hull carved by voxel centres
+    # (a voxel thinner than the one hollowed) loses: its walls would be a voxel thin, which the hull's
+    # signed distance (smoothed) does not hold, and a refinement started from it started empty.
+    core: np.ndarray | None = None
 
     def sentence(self) -> str:
         if self.why_not:
@@ -74,7 +78,9 @@ def hollow_below_opening(hull: np.ndarray, carving: PhotoCarving,
     removed = hull & ~kept
 
     def result(occupancy: np.ndarray, hollowed: int, wall: float, share: float, why: str) -> UnseenHollow:
-        return UnseenHollow(np.moveaxis(occupancy, -1, up).copy(), hollowed, wall, share, why)
+        hollow = kept & ~occupancy
+        core = hollow & ndimage.binary_erosion(hollow | removed, np.ones((3, 3, 1), bool), border_value=1)
+        return UnseenHollow(np.moveaxis(occupancy, -1, up).copy(), hollowed, wall, share, why, np.moveaxis(core, -1, up).copy())
 
     if not removed.any():
         return result(kept, 0, nan, nan, "the carving removed nothing")
