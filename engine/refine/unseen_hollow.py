@@ -77,19 +77,17 @@ def hollow_below_opening(hull: np.ndarray, carving: PhotoCarving,
     hull, kept, seen = (np.moveaxis(a, up, -1) for a in (hull, kept, np.asarray(carving.seen_surface, bool)))
     removed = hull & ~kept
 
-    def result(occupancy: np.ndarray, hollowed: int, wall: float, share: float, why: str) -> UnseenHollow:
+    def result(occupancy: np.ndarray, wall: float, share: float, why: str) -> UnseenHollow:
         hollow = kept & ~occupancy
         core = hollow & ndimage.binary_erosion(hollow | removed, np.ones((3, 3, 1), bool), border_value=1)
-        return UnseenHollow(np.moveaxis(occupancy, -1, up).copy(), hollowed, wall, share, why, np.moveaxis(core, -1, up).copy())
+        return UnseenHollow(np.moveaxis(occupancy, -1, up).copy(), int(hollow.sum()), wall, share, why,
+                            np.moveaxis(core, -1, up).copy())
 
     if not removed.any():
-        return result(kept, 0, nan, nan, "the carving removed nothing")
+        return result(kept, nan, nan, "the carving removed nothing")
     depth = ndimage.distance_transform_edt(hull)  # voxels to the hull's outside
-    beside = np.zeros_like(removed)  # kept voxels next to the carved space, across (not above or below)
-    for axis in (0, 1):
-        for shift in (1, -1):
-            beside |= np.roll(removed, shift, axis=axis)
-    walls = kept & beside
+    across = ndimage.generate_binary_structure(2, 1)[..., None]  # the 4 neighbours across (not above or below)
+    walls = kept & ndimage.binary_dilation(removed, across)  # kept voxels next to the carved space
     seen_walls = walls & seen
     measured = seen_walls if seen_walls.sum() >= config.min_floor_points else walls
     wall = max(float(np.median(depth[measured])), config.min_wall_voxels) if measured.any() else config.min_wall_voxels
@@ -98,14 +96,14 @@ def hollow_below_opening(hull: np.ndarray, carving: PhotoCarving,
     above_removed[..., :-1] = removed[..., 1:]
     bottom = kept & inside & above_removed
     if bottom.sum() < config.min_bottom_voxels:
-        return result(kept, 0, wall, nan, f"the carved space has no inside to continue ({int(bottom.sum())} voxels of "
+        return result(kept, wall, nan, f"the carved space has no inside to continue ({int(bottom.sum())} voxels of "
                                           f"bottom {wall:.1f} voxels or more inside the walls)")
     share = float((bottom & ndimage.binary_dilation(seen)).sum() / bottom.sum())
     if share > config.max_seen_share:
-        return result(kept, 0, wall, share, f"the photos saw its bottom ({100 * share:.0f}% of it matched): a floor")
+        return result(kept, wall, share, f"the photos saw its bottom ({100 * share:.0f}% of it matched): a floor")
     skin = seen & (depth <= 1.5)
     if skin.sum() < config.min_floor_points:
-        return result(kept, 0, wall, share, f"too little of the outer surface was matched ({int(skin.sum())} voxels) "
+        return result(kept, wall, share, f"too little of the outer surface was matched ({int(skin.sum())} voxels) "
                                             f"to place a floor by")
     lowest_seen = float(np.quantile(np.nonzero(skin)[2], config.floor_quantile))
     lowest_hollow = max(int(np.ceil(lowest_seen + wall + 0.5)), 0)
@@ -124,4 +122,4 @@ def hollow_below_opening(hull: np.ndarray, carving: PhotoCarving,
         if not grown.any():
             break
         hollow |= grown
-    return result(kept & ~hollow, int(hollow.sum()), wall, share, "" if hollow.any() else "nothing lies under the opening")
+    return result(kept & ~hollow, wall, share, "" if hollow.any() else "nothing lies under the opening")
