@@ -30,6 +30,7 @@ __all__ = [
     "look_at",
     "orbit_camera",
     "orbit_cameras",
+    "nearest_cameras",
     "distance_to_cover_sphere",
     "fov_to_focal",
     "focal_to_fov",
@@ -749,3 +750,10 @@ def orbit_cameras(
                      target=target, axis=axis)
         for k in range(n)
     ]
+
+
+def nearest_cameras(cameras: Mapping[Any, Camera], key: Any, count: int) -> list:
+    """The keys of the `count` other cameras whose centres stand nearest to `cameras[key]`'s (ties in
+    the mapping's order): the neighbours a view is compared with (floor parallax, photo carving)."""
+    centre = cameras[key].center
+    return sorted((k for k in cameras if k != key), key=lambda k: float(np.linalg.norm(cameras[k].center - centre)))[:count]

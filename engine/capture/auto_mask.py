@@ -44,8 +44,8 @@ from typing import Callable, Mapping
 import cv2
 import numpy as np
 
-from lirm.engine.cameras import Camera
-from lirm.engine.capture.floor_parallax import floor_agreement, floor_disagreement, floor_sight, nearest_views, off_floor_evidence
+from lirm.engine.cameras import Camera, nearest_cameras
+from lirm.engine.capture.floor_parallax import floor_agreement, floor_disagreement, floor_sight, off_floor_evidence
 from lirm.engine.capture.masks import check_mask
 from lirm.engine.capture.normalize import is_floor
 from lirm.engine.capture.plain_backdrop import BACKDROP, BACKDROP_COLOURED
@@ -251,7 +251,7 @@ def _attach_floor_evidence(views: dict[str, "_View"], images: Mapping[str, np.nd
         work = view.work
         # 1.5 pixels of a 640-pixel photo (poses are right to about a pixel), in working pixels.
         blur = 1.5 * max(view.full_w, view.full_h) / 640.0 * work.camera.width / (view.x1 - view.x0)
-        others = [scaled[g] for g in nearest_views({g: cameras[g] for g in views}, f, cfg.floor_parallax_neighbours)]
+        others = [scaled[g] for g in nearest_cameras({g: cameras[g] for g in views}, f, cfg.floor_parallax_neighbours)]
         sight = floor_sight(work.camera, work.image, others, plane, reach=_FLOOR_REACH * radius, blur_px=max(blur, 0.5))
         disagreement = floor_disagreement(work.camera, work.image, others, plane, sight=sight)
         work.off_floor = off_floor_evidence(disagreement, cfg.floor_parallax_threshold)

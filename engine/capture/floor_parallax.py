@@ -23,20 +23,14 @@ almost none of the floor; the lowest band of the object, whose parallax is small
 
 from __future__ import annotations
 
-from typing import Mapping, NamedTuple, Sequence
+from typing import NamedTuple, Sequence
 
 import cv2
 import numpy as np
 
 from lirm.engine.cameras import Camera
 
-__all__ = ["FloorSight", "floor_agreement", "floor_disagreement", "floor_sight", "nearest_views", "off_floor_evidence"]
-
-
-def nearest_views(cameras: Mapping[str, Camera], frame: str, count: int) -> list[str]:
-    """The `count` other frames whose cameras stand nearest to `frame`'s."""
-    centre = cameras[frame].center
-    return sorted((g for g in cameras if g != frame), key=lambda g: float(np.linalg.norm(cameras[g].center - centre)))[:count]
+__all__ = ["FloorSight", "floor_agreement", "floor_disagreement", "floor_sight", "off_floor_evidence"]
 
 
 def floor_disagreement(camera: Camera, image: np.ndarray, others: Sequence[tuple[Camera, np.ndarray]],

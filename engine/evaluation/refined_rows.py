@@ -75,7 +75,7 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
     start = time.perf_counter()
     hulls = initial_fields.views_hulls(views, refine, model.config.radius)
     hull, footprint_hull = hulls.centres, hulls.footprint
-    grid = initial_fields.views_sampling_grid(views, refine, model.config.radius, footprint_hull)
+    grid = initial_fields.views_sampling_grid(views, refine, model.config.radius, hulls)
     resolution = refine.plane_resolutions[0]
     chosen = init
     if init == "lirm":

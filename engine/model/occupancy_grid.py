@@ -25,9 +25,12 @@ class OccupancyConfig:
 
 
 class OccupancyGrid:
-    def __init__(self, occupied: torch.Tensor, radius: float):
+    def __init__(self, occupied: torch.Tensor, radius: float, opened: torch.Tensor | None = None):
         self.occupied = occupied  # (G, G, G) bool, indexed [ix, iy, iz]
         self.radius = radius
+        # (G, G, G) bool or None: empty voxels that a refinement's evidence or prior opened inside the
+        # object's hull (a carved opening, the hollow under it), where a stray surface is likeliest
+        self.opened = opened
 
     @property
     def resolution(self) -> int:

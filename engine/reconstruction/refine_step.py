@@ -159,7 +159,7 @@ def _refine_locked(capture_dir, source: ModelSource, config: RefineConfig, init:
     hulls = initial_fields.views_hulls(views, config, radius)
     hull, footprint_hull = hulls.centres, hulls.footprint
     notes.extend(hulls.sentences())
-    grid = initial_fields.views_sampling_grid(views, config, radius, footprint_hull)
+    grid = initial_fields.views_sampling_grid(views, config, radius, hulls)
     if grid is None:
         notes.append("the masks' visual hull is empty (masks or poses disagree): sampling the whole bounding sphere")
     refinable, started_from = _starting_field(capture, init, source, views, hull, footprint_hull, grid, config, notes, cancel)

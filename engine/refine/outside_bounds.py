@@ -20,18 +20,28 @@ from scipy import ndimage
 from lirm.engine.model.occupancy_grid import OccupancyGrid
 
 REACH_VOXELS = 16  # how far from the grid's occupied voxels the points are spread
+# The share of the points in the grid's opened voxels (OccupancyGrid.opened), when it has any. Spread
+# evenly, 2.7% of them fell in the synthetic mug's opened inside (the rest in the open air round it),
+# about 14 a step, and the fit closed the opening with a lid there that no render showed.
+OPENED_SHARE = 0.5
 
 
 class OutsideBounds:
-    def __init__(self, grid: OccupancyGrid, reach_voxels: int = REACH_VOXELS):
+    def __init__(self, grid: OccupancyGrid, reach_voxels: int = REACH_VOXELS, opened_share: float = OPENED_SHARE):
         occupied = grid.occupied.cpu().numpy().astype(bool)
         distance = ndimage.distance_transform_edt(~occupied)  # voxels, centre to nearest occupied centre
         near = ~occupied & (distance <= reach_voxels)
         self._radius = grid.radius
         self._voxel = 2.0 * grid.radius / grid.resolution
-        self._voxels = torch.from_numpy(np.argwhere(near)).long()
+        opened = np.zeros_like(near) if grid.opened is None else grid.opened.cpu().numpy().astype(bool) & near
+        # The opened voxels first, then the rest: `points` draws from each part its share.
+        order = np.concatenate([np.argwhere(opened), np.argwhere(near & ~opened)])
+        self._voxels = torch.from_numpy(order).long()
+        self._opened = int(opened.sum())
+        self._opened_share = opened_share if 0 < self._opened < len(order) else float(self._opened == len(order))
         # A point anywhere in its voxel is at least a voxel less than the centres' distance from the grid.
-        self._bounds = torch.from_numpy(np.maximum(distance[near] - 1.0, 0.0).astype(np.float32)) * self._voxel
+        bounds = np.maximum(distance[tuple(order.T)] - 1.0, 0.0) if len(order) else np.zeros(0)
+        self._bounds = torch.from_numpy(bounds.astype(np.float32)) * self._voxel
 
     @property
     def empty(self) -> bool:
@@ -42,7 +52,10 @@ class OutsideBounds:
         (None when the grid leaves none)."""
         if self.empty:
             return None
-        pick = torch.randint(0, self._voxels.shape[0], (count,), generator=generator)
+        in_opened = round(count * self._opened_share)
+        pick = torch.cat([torch.randint(0, max(self._opened, 1), (in_opened,), generator=generator),
+                          torch.randint(self._opened, max(self._voxels.shape[0], self._opened + 1), (count - in_opened,),
+                                        generator=generator)])
         corner = self._voxels[pick].to(torch.float32)
         points = -self._radius + (corner + torch.rand(count, 3, generator=generator)) * self._voxel
         return torch.cat([points, self._bounds[pick, None]], dim=1).to(device)

@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from lirm.engine.cameras import Camera
+from lirm.engine.cameras import Camera, nearest_cameras
 
 __all__ = ["PhotoCarvingConfig", "PhotoCarving", "photo_carve_occupancy"]
 
@@ -85,10 +85,9 @@ def photo_carve_occupancy(occupancy: np.ndarray, radius: float, cameras: list[Ca
     free_views = np.zeros(occupancy.shape, np.int16)
     surface_views = np.zeros(occupancy.shape, np.int16)
     seeing_through = 0
-    centres = np.array([c.center for c in cameras])
+    by_index = dict(enumerate(cameras))
     for i, camera in enumerate(cameras):
-        order = np.argsort(np.linalg.norm(centres - centres[i], axis=1))
-        others = [int(j) for j in order if j != i][: config.neighbours]
+        others = nearest_cameras(by_index, i, config.neighbours)
         if len(others) < config.views_agreeing:
             break
         through = _view_free_space(i, camera, luminance, masks, cameras, others, occupancy, radius, voxel, config)

@@ -20,6 +20,7 @@ from lirm.engine.cameras import (
     look_at,
     opencv_to_opengl_c2w,
     opengl_to_opencv_c2w,
+    nearest_cameras,
     orbit_camera,
     orbit_cameras,
     plucker_rays,
@@ -426,3 +427,12 @@ def test_from_dict_nerf_style_and_unsupported():
         Camera.from_dict({**shared, **frame, "k4": 0.1})
     with pytest.raises(ValueError, match="lacks"):
         Camera.from_dict(frame)
+
+
+def test_nearest_cameras_are_the_closest_centres_other_than_its_own():
+    ring = {f"{k:04d}": orbit_camera(36.0 * k, 20.0, 3.0, 64, 64, 40.0) for k in range(10)}
+    assert sorted(nearest_cameras(ring, "0000", 2)) == ["0001", "0009"]
+    assert set(nearest_cameras(ring, "0000", 4)) == {"0001", "0009", "0002", "0008"}
+    assert "0000" not in nearest_cameras(ring, "0000", 10) and len(nearest_cameras(ring, "0000", 10)) == 9
+    by_index = dict(enumerate(ring.values()))  # any keys: photo carving numbers its views
+    assert sorted(nearest_cameras(by_index, 5, 2)) == [4, 6]

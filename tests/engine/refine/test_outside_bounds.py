@@ -60,3 +60,23 @@ def test_a_grid_filling_the_cube_leaves_no_points():
     grid = OccupancyGrid(torch.ones(RESOLUTION, RESOLUTION, RESOLUTION, dtype=torch.bool), 1.0)
     outside = OutsideBounds(grid)
     assert outside.empty and outside.points(10, torch.Generator(), torch.device("cpu")) is None
+
+
+def test_half_the_points_fall_in_what_was_opened_inside_the_hull():
+    """A shell (a ball with a hollow the carving opened): its opened inside is a few per cent of the
+    empty voxels round the grid, yet it gets half the points, each bounded by its distance to the shell."""
+    grid = ball_grid(0.8)
+    centres = -1.0 + (torch.arange(RESOLUTION) + 0.5) * (2.0 / RESOLUTION)
+    x, y, z = torch.meshgrid(centres, centres, centres, indexing="ij")
+    hollow = (x**2 + y**2 + z**2).sqrt() <= 0.5
+    shell = OccupancyGrid(grid.occupied & ~hollow, 1.0, opened=hollow)
+    points = OutsideBounds(shell).points(4000, torch.Generator().manual_seed(0), torch.device("cpu"))
+    inside = points[:, :3].norm(dim=-1) <= 0.5 + 2.0 / RESOLUTION
+    assert 0.45 < inside.float().mean() < 0.55
+    assert not shell.lookup(points[:, :3]).any()
+    assert points[inside, 3].max() > 0.2  # the hollow's middle lies 0.5 from the shell: its points say so
+    occupied = -1.0 + (shell.occupied.nonzero().float() + 0.5) * (2.0 / RESOLUTION)
+    assert (points[:, 3] <= torch.cdist(points[:, :3], occupied).min(dim=1).values + 1e-6).all()
+    # Without the opened voxels marked, the same shell's points fall in its hollow a few per cent of the time.
+    plain = OutsideBounds(OccupancyGrid(shell.occupied, 1.0)).points(4000, torch.Generator().manual_seed(0), torch.device("cpu"))
+    assert (plain[:, :3].norm(dim=-1) <= 0.5 + 2.0 / RESOLUTION).float().mean() < 0.15
