@@ -107,8 +107,6 @@ class RefineConfig:
     eikonal_points: int = 1024
     hull_resolution: int = 64  # the visual hull of the masks bounds where samples are taken
     hull_dilation_voxels: int = 2  # slack for masks and poses that are not exact (real captures)
-    # ... of which this much reaches into what the photo carving and the hollow opened (initial_fields.sampling_grid)
-    opened_slack_voxels: int = 1
     # The hull carved further where the photos see through it (photo_carving.py: a mug's opening, which
     # every mask covers). Off: the photos see only the opening's upper part, and the floor the fit puts
     # where they stop lies farther from the true inside than the lid did (README, "What the photos see

@@ -87,21 +87,19 @@ def _recoloured(state: CarvedHullState, views: RefineViews, radius: float, keep:
 
 
 def sampling_grid(hull: CarvedHullState, radius: float, dilation_voxels: int, device: str | torch.device = "cpu",
-                  opened: np.ndarray | None = None, opened_slack_voxels: int = 1) -> OccupancyGrid | None:
+                  opened: np.ndarray | None = None) -> OccupancyGrid | None:
     """The hull, dilated by a few voxels for masks and poses that are not exact: no part of the
     object can lie outside it, so samples there are wasted. None when the masks carved everything
     away (inconsistent masks or poses): then the refinement samples the whole bounding sphere.
-    `opened`: voxels the photos saw through or the hollow's prior emptied (ViewsHulls.opened); the
-    dilation reaches only `opened_slack_voxels` into them. The slack is for the masks' edges: grown
-    into a carved opening it gave back 57% of the synthetic mug's opened inside, and the fit filled it."""
+    `opened`: voxels the photos saw through or the hollow's prior emptied (ViewsHulls.opened); those
+    the dilation leaves empty are marked in the grid for the outside term (outside_bounds.py). (The
+    dilation reached only a voxel into them for a while: the synthetic mug measured the same, and the
+    demo mug's rim lost a quarter of its top, README "The hollow that holds".)"""
     if hull.occupancy is None or not hull.occupancy.any():
         return None
     occupied = ndimage.binary_dilation(hull.occupancy, iterations=dilation_voxels) if dilation_voxels else hull.occupancy
     outside_opened = None
     if opened is not None and opened.any():
-        slack = (ndimage.binary_dilation(hull.occupancy, iterations=opened_slack_voxels) if opened_slack_voxels
-                 else hull.occupancy)
-        occupied = occupied & ~(opened & ~slack)
         outside_opened = torch.from_numpy(np.ascontiguousarray(opened & ~occupied)).to(device)
     return OccupancyGrid(torch.from_numpy(np.ascontiguousarray(occupied)).to(device), radius, outside_opened)
 
@@ -117,8 +115,7 @@ def views_sampling_grid(views: RefineViews, config: RefineConfig, radius: float,
     if hulls is None:
         return sampling_grid(masks_hull(views, config.hull_resolution, radius, footprint=True), radius,
                              config.hull_dilation_voxels, config.device)
-    return sampling_grid(hulls.footprint, radius, config.hull_dilation_voxels, config.device, hulls.opened,
-                         config.opened_slack_voxels)
+    return sampling_grid(hulls.footprint, radius, config.hull_dilation_voxels, config.device, hulls.opened)
 
 
 def footprint_keeps_lost_parts(centres: CarvedHullState, footprint: CarvedHullState, margin_voxels: int = 2,

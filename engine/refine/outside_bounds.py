@@ -21,8 +21,8 @@ from lirm.engine.model.occupancy_grid import OccupancyGrid
 
 REACH_VOXELS = 16  # how far from the grid's occupied voxels the points are spread
 # The share of the points in the grid's opened voxels (OccupancyGrid.opened), when it has any. Spread
-# evenly, 2.7% of them fell in the synthetic mug's opened inside (the rest in the open air round it),
-# about 14 a step, and the fit closed the opening with a lid there that no render showed.
+# evenly, 2-3% of them fell in the synthetic mug's opened inside (the rest in the open air round it),
+# 9-14 of 512 a step, and the fit filled the hollow and closed the opening with a lid no render showed.
 OPENED_SHARE = 0.5
 
 
