@@ -14,9 +14,10 @@ left as it is), the inside continues down from it, layer by layer, across the wh
 opening's outline (the carved space's footprint filled out to its convex hull: the carving empties
 only the patches the photos matched), keeping a wall as thick as the walls the photos did see round
 the opening (the hull's voxels beside the carved space, their distance to the hull's outside) and a
-voxel more, and stopping that thick above the lowest outer surface the photos saw (not the hull's
-bottom: the wedge the masks leave under an object seen from above reaches far below it).
-It only ever removes, and only below a carved opening, where no photo looked.
+voxel more, and stopping that thick (or 6% of the height) above the base: the lowest outer surface
+the photos saw, or lower where the hull keeps its width (not the hull's bottom: the wedge the masks
+leave under an object seen from above reaches far below it). The lid the hull keeps over the
+opening goes too. It only ever removes, and only round a carved opening, where no photo looked.
 """
 
 from __future__ import annotations
@@ -102,8 +103,8 @@ def hollow_below_opening(hull: np.ndarray, carving: PhotoCarving,
     if not removed.any():
         return result(kept, nan, nan, "the carving removed nothing")
     depth = ndimage.distance_transform_edt(hull)  # voxels to the hull's outside
-    across = ndimage.generate_binary_structure(2, 1)[..., None]  # the 4 neighbours across (not above or below)
-    walls = kept & ndimage.binary_dilation(removed, across)  # kept voxels next to the carved space
+    sideways = ndimage.generate_binary_structure(2, 1)[..., None]  # the 4 neighbours across (not above or below)
+    walls = kept & ndimage.binary_dilation(removed, sideways)  # kept voxels next to the carved space
     seen_walls = walls & seen
     measured = seen_walls if seen_walls.sum() >= config.min_floor_points else walls
     wall = max(float(np.median(depth[measured])), config.min_wall_voxels) if measured.any() else config.min_wall_voxels
@@ -148,10 +149,10 @@ def _cap_over(hull: np.ndarray, kept: np.ndarray, opened: np.ndarray, seen: np.n
     """The lid the masks' hull keeps over what was opened (up axis last): in the columns of the
     opening's outline whose highest opened voxel lies at most `wall` and a voxel below the hull's top,
     the kept voxels above it, up to the first the photos matched (a wall's top, which no opened voxel
-    comes near, stays; over a cup the masks' hull is a dome of air, too narrow across for a wall test). The sweep carves nothing within two
-    voxels of the hull's surface (its matches there are the surface's own), so over the synthetic
-    mugs' openings the hull's top stayed, 3-4 voxels with the sampling's slack, and the fit closed
-    the opening with it: a lid the photos look through."""
+    comes near, stays; over a cup the masks' hull is a dome of air, too narrow across for a wall
+    test). The sweep carves nothing within two voxels of the hull's surface (its matches there are
+    the surface's own), so over the synthetic mugs' openings the hull's top stayed, 3-4 voxels with
+    the sampling's slack, and the fit closed the opening with it: a lid the photos look through."""
     resolution = kept.shape[-1]
     layers = np.arange(resolution)[None, None, :]
     has_opened = opened.any(axis=-1)
