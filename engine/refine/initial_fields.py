@@ -73,7 +73,7 @@ def views_hulls(views: RefineViews, config: RefineConfig, radius: float) -> View
     from_bounds = removed if hollow is None else footprint_hull.occupancy & ~hollow.occupancy
     return ViewsHulls(_recoloured(hull, views, radius, ~from_start),
                       _recoloured(footprint_hull, views, radius, ~from_bounds, footprint=True), carving, hollow,
-                      from_bounds & footprint_hull.occupancy if from_bounds.any() else None)
+                      from_bounds if from_bounds.any() else None)
 
 
 def _recoloured(state: CarvedHullState, views: RefineViews, radius: float, keep: np.ndarray,
