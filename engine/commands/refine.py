@@ -36,11 +36,11 @@ def add_parser(subparsers) -> None:
                         help="inverse-render the materials: shade them under the capture's lighting (fitted with them, "
                              "from the estimate `lirm capture` made) and fit that to the photos, so that albedo holds no "
                              "baked shading (experimental: see the README's relighting figures)")
-    parser.add_argument("--carve-openings", action="store_true",
-                        help="before the fit, carve the masks' hull where the photos see through it (a cup's "
-                             "opening, which every mask covers; textured insides only), and continue an opening whose "
-                             "bottom no photo saw down to a floor a wall's thickness above the base (README, 'What the "
-                             "photos see through the hull', 'The inside no photo saw')")
+    parser.add_argument("--no-carve-openings", dest="carve_openings", action="store_false",
+                        help="leave the masks' hull as the masks make it: by default it is carved first where the "
+                             "photos see through it (a cup's opening, which every mask covers; textured insides only), "
+                             "and an opening whose bottom no photo saw continues down to a floor over the base "
+                             "(README, 'What the photos see through the hull', 'The hollow that holds')")
     parser.add_argument("--light-lobes", type=int, default=None, metavar="K",
                         help="with --materials: fit K compact lights (spherical Gaussians) beside the lighting panorama, for a "
                              "sun or lamp the photos did not see (default 1; 0: the panorama alone; README: what one was worth)")
@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
 
     from ..reconstruction.refine_step import run_refine
     from ..reconstruction.session import ReconstructConfig
-    from ..refine.config import CARVED_OUTSIDE_BOUNDS, refine_preset
+    from ..refine.config import refine_preset
 
     require_at_least_one(args, "novel_views", "holdout_every", "iterations")
     check_render_options(args)
@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     device = ("cuda" if torch.cuda.is_available() else "cpu") if args.device == "auto" else args.device
     if device.startswith("cuda") and not torch.cuda.is_available():
         raise LirmUserError("--device cuda: no CUDA device is available here; use --device cpu")
-    overrides = {"device": device, "inverse_rendering": bool(args.materials), "photo_carving": bool(args.carve_openings)}
+    overrides = {"device": device, "inverse_rendering": bool(args.materials)}
     if args.light_lobes is not None:
         overrides["light_lobes"] = args.light_lobes
     if args.minutes is not None:
@@ -86,9 +86,10 @@ def run(args: argparse.Namespace) -> int:
         if args.minutes is None:
             overrides["minutes"] = None  # --iterations alone: run them all
     config = refine_preset(args.preset, **overrides)
-    if args.carve_openings:
-        # With the term that keeps the carved space empty: without it the fit grew the lid back (README).
-        config = replace(config, losses=replace(config.losses, outside_bounds=CARVED_OUTSIDE_BOUNDS))
+    if not args.carve_openings:
+        # The hull as the masks make it, and without the term that keeps the carved space empty (the two
+        # were measured together: README, "The hollow that holds").
+        config = replace(config, photo_carving=False, losses=replace(config.losses, outside_bounds=0.0))
     source = reconstruction_model(Capture.open(args.capture), args.checkpoint)
     budget = f"{config.minutes:g} min" if config.minutes else f"{config.iterations} steps"
     print(f"refining {args.capture} on {device} for {budget} (Ctrl-C stops and keeps the best state so far)", file=sys.stderr)

@@ -81,12 +81,15 @@ def test_refine_is_a_step_of_the_history_that_export_and_suggest_read(capture, t
 
 def test_refine_from_the_hull_with_the_updates_materials(capture, capsys):
     assert main(["reconstruct", str(capture), "--updates", "1"] + FAST_UPDATE) == 0
-    assert main(["refine", str(capture), "--init", "hull-lirm", "--carve-openings"] + QUICK) == 0
+    assert main(["refine", str(capture), "--init", "hull-lirm"] + QUICK) == 0
     out = capsys.readouterr().out
     assert "(from carved hull with LIRM update 1's materials)" in out
-    # The hull carved where the photos see through it first (the lego's textured crooks), and said so.
+    # By default the hull is carved where the photos see through it first (the lego's textured crooks), and said so.
     assert "note: the photos see through the masks' hull at" in out and "voxels carved" in out
     assert Capture.open(capture).updates[-1]["started_from"] == "carved hull with LIRM update 1's materials"
+    # Asked not to, the hull stays as the masks make it.
+    assert main(["refine", str(capture), "--init", "hull-lirm", "--no-carve-openings"] + QUICK) == 0
+    assert "see through the masks' hull" not in capsys.readouterr().out
 
 
 def test_light_lobes_need_the_materials_and_a_sane_count(capture, capsys):
