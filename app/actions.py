@@ -308,6 +308,16 @@ class AppActions:
         path = self.state.capture_dir / "app" / "refine_live.safetensors"
         return path if path.is_file() else None
 
+    def refine_arguments(self, minutes: float, live: Path) -> list[str]:
+        """The `lirm refine` command line the Refine button runs, with the panel's choices."""
+        args = ["refine", str(self.state.capture_dir), "--minutes", f"{minutes:g}", "--novel-views", "1", "--render-size", "64",
+                "--grid-resolution", "64", "--live", str(live), "--live-every", "4", *self._ckpt()]
+        if self.state.choices.refine_materials:
+            args.append("--materials")
+        if not self.state.choices.refine_carve_openings:
+            args.append("--no-carve-openings")
+        return args
+
     def run_refine(self, minutes: float | None = None) -> Job | None:
         """Per-scene refinement of the latest step on all the views (`lirm refine`), shown live in the
         viewport's field channel; Cancel keeps the best state so far as a step of the history."""
@@ -324,10 +334,7 @@ class AppActions:
         number = len(self.state.updates) + 1
         live = self.state.capture_dir / "app" / "refine_live.safetensors"
         live.parent.mkdir(parents=True, exist_ok=True)
-        args = ["refine", str(self.state.capture_dir), "--minutes", f"{minutes:g}", "--novel-views", "1", "--render-size", "64",
-                "--grid-resolution", "64", "--live", str(live), "--live-every", "4", *self._ckpt()]
-        if self.state.choices.refine_materials:
-            args.append("--materials")
+        args = self.refine_arguments(minutes, live)
         previous_channel = self.state.choices.view.channel
         self.set_channel("field")  # the field as it fits; the mesh preview follows when it is done
 

@@ -81,6 +81,9 @@ class SavedChoices:
     # Refine inverse-renders the materials under the capture's lighting (`lirm refine --materials`):
     # the asset is for relighting, and a plain fit bakes the photos' shading into the albedo.
     refine_materials: bool = True
+    # Refine carves the masks' hull where the photos see through it (a cup's opening) before the fit,
+    # as `lirm refine` does by default; off: `--no-carve-openings`, the hull as the masks make it.
+    refine_carve_openings: bool = True
 
 
 @dataclass
@@ -204,6 +207,8 @@ class AppState:
         out.auto_update = take(data, "auto_update", "automatic updates", _bool, defaults.auto_update)
         out.refine_minutes = take(data, "refine_minutes", "refinement minutes", _positive_number, defaults.refine_minutes)
         out.refine_materials = take(data, "refine_materials", "refinement of the materials", _bool, defaults.refine_materials)
+        out.refine_carve_openings = take(data, "refine_carve_openings", "carving of openings", _bool,
+                                         defaults.refine_carve_openings)
         view = take(data, "view", "viewport settings", _section, {})
         v, dv = out.view, defaults.view
         v.channel = take(view, "channel", "viewport channel", lambda x: _one_of(x, CHANNELS), dv.channel)

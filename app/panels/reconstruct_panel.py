@@ -50,6 +50,14 @@ class ReconstructPanel:
         if imgui.is_item_hovered(imgui.HoveredFlags_.for_tooltip):
             imgui.set_tooltip("Refine also inverse-renders albedo, roughness and metallic under the lighting the photos\n"
                               "were taken in, so the asset relights without the photos' shading baked in.")
+        changed, carve = imgui.checkbox("open what the photos see into (a cup's inside)", state.choices.refine_carve_openings)
+        if changed:
+            state.choices.refine_carve_openings = carve
+            state.save_choices()
+        if imgui.is_item_hovered(imgui.HoveredFlags_.for_tooltip):
+            imgui.set_tooltip("Before the fit, Refine carves the masks' outline hull where the photos see through it\n"
+                              "(a mug's opening, which every silhouette covers) and continues the inside down to a floor.\n"
+                              "Turn it off if it opens a solid object (lirm refine --no-carve-openings).")
         imgui.end_disabled()
         changed, auto = imgui.checkbox("updates automatically as views arrive", state.choices.auto_update)
         if changed:

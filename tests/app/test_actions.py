@@ -28,6 +28,23 @@ def test_opening_what_is_not_a_capture_says_what_to_do(app, tmp_path):
     assert app.state.capture_dir is None
 
 
+def test_refine_runs_lirm_refine_with_the_panels_choices(app, tmp_path):
+    app.state.capture_dir = tmp_path / "capture"
+    live = tmp_path / "live.safetensors"
+    args = app.refine_arguments(2.0, live)
+    assert args[:2] == ["refine", str(tmp_path / "capture")] and args[args.index("--minutes") + 1] == "2"
+    # By default: the materials, and the openings carved as `lirm refine` does on its own.
+    assert "--materials" in args and "--no-carve-openings" not in args
+    app.state.choices.refine_materials = False
+    app.state.choices.refine_carve_openings = False
+    args = app.refine_arguments(0.5, live)
+    assert "--materials" not in args and "--no-carve-openings" in args
+    # The command line the job runs is one `lirm refine` takes.
+    from lirm.engine.cli import build_parser
+    parsed = build_parser().parse_args(args)
+    assert parsed.carve_openings is False and parsed.materials is False
+
+
 @pytest.mark.slow
 def test_updates_step_back_and_choices_survive_a_restart(app, lego_capture, tmp_path):
     capture = tmp_path / "capture"
