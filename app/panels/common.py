@@ -19,6 +19,16 @@ def job_progress(job: Job, cancel) -> None:
         cancel(job)
 
 
+def saved_choice_checkbox(state, label: str, choice: str, tip: str | None = None) -> None:
+    """A checkbox on one of the capture's saved choices (`state.choices.<choice>`), saved when clicked."""
+    changed, value = imgui.checkbox(label, getattr(state.choices, choice))
+    if changed:
+        setattr(state.choices, choice, value)
+        state.save_choices()
+    if tip and imgui.is_item_hovered(imgui.HoveredFlags_.for_tooltip):
+        imgui.set_tooltip(tip)
+
+
 def coloured(text: str, level: str) -> None:
     imgui.text_colored(COLOURS.get(level, COLOURS["info"]), text)
 

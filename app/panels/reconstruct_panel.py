@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from imgui_bundle import imgui
 
-from .common import coloured, format_seconds, job_progress
+from .common import coloured, format_seconds, job_progress, saved_choice_checkbox
 
 
 class ReconstructPanel:
@@ -43,26 +43,15 @@ class ReconstructPanel:
         if changed:
             state.choices.refine_minutes = round(minutes * 2) / 2
             state.save_choices()
-        changed, materials = imgui.checkbox("refine the materials too (for relighting)", state.choices.refine_materials)
-        if changed:
-            state.choices.refine_materials = materials
-            state.save_choices()
-        if imgui.is_item_hovered(imgui.HoveredFlags_.for_tooltip):
-            imgui.set_tooltip("Refine also inverse-renders albedo, roughness and metallic under the lighting the photos\n"
+        saved_choice_checkbox(state, "refine the materials too (for relighting)", "refine_materials",
+                              "Refine also inverse-renders albedo, roughness and metallic under the lighting the photos\n"
                               "were taken in, so the asset relights without the photos' shading baked in.")
-        changed, carve = imgui.checkbox("open what the photos see into (a cup's inside)", state.choices.refine_carve_openings)
-        if changed:
-            state.choices.refine_carve_openings = carve
-            state.save_choices()
-        if imgui.is_item_hovered(imgui.HoveredFlags_.for_tooltip):
-            imgui.set_tooltip("Before the fit, Refine carves the masks' outline hull where the photos see through it\n"
+        saved_choice_checkbox(state, "open what the photos see into (a cup's inside)", "refine_carve_openings",
+                              "Before the fit, Refine carves the masks' outline hull where the photos see through it\n"
                               "(a mug's opening, which every silhouette covers) and continues the inside down to a floor.\n"
                               "Turn it off if it opens a solid object (lirm refine --no-carve-openings).")
         imgui.end_disabled()
-        changed, auto = imgui.checkbox("updates automatically as views arrive", state.choices.auto_update)
-        if changed:
-            state.choices.auto_update = auto
-            state.save_choices()
+        saved_choice_checkbox(state, "updates automatically as views arrive", "auto_update")
         imgui.text_wrapped(f"views for it: {', '.join(next_views) or 'none left: every view is used'}")
         for job in running + refining + app.jobs.running("preview"):
             job_progress(job, app.jobs.cancel)

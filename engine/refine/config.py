@@ -16,7 +16,6 @@ CURVATURE_STEP = 0.01  # of the bounding radius: about a pixel's footprint at th
 APPEARANCE_WEIGHT = 1e-4
 
 
-
 @dataclass(frozen=True)
 class LossWeights:
     colour: float = 1.0  # L1 on the radiance over white, against the masked photo
@@ -105,7 +104,7 @@ class RefineConfig:
     # The hull carved further where the photos see through it (photo_carving.py: a mug's opening, which
     # every mask covers), with the hollow below (hollow_openings). On by default since stop 79: the demo
     # mug comes back open, relit 18.61 -> 18.78 dB, its fitted light's up-plane irradiance 0.63 -> 0.71 x;
-    # the held-out sets the same within a run's noise (README, "The hollow that holds").
+    # the held-out sets the same within a run's noise (README, "On by default").
     photo_carving: bool = True
     # With `photo_carving`: an opening whose bottom the photos did not see continued down to a floor
     # a wall's thickness above the lowest surface they saw (unseen_hollow.py: a mug's inside).
