@@ -14,11 +14,12 @@ from lirm.renderer.context import GLContextError
 
 from . import progress_events
 from .commands import app, bench, capture, curve, demo, export, fetch, reconstruct, refine, render, ship, suggest, train
+from .commands import train_materials
 from .commands import eval as eval_
 from .errors import LirmResourceError, LirmUsageError, LirmUserError
 
 # The commands in the order `lirm --help` lists them; each is a module of engine/commands/.
-COMMANDS = (app, demo, render, capture, reconstruct, refine, export, suggest, train, curve, eval_, ship, bench, fetch)
+COMMANDS = (app, demo, render, capture, reconstruct, refine, export, suggest, train, train_materials, curve, eval_, ship, bench, fetch)
 
 # Exit codes (README "Exit codes"): what went wrong, for scripts and for the app's background jobs.
 EXIT_OK = 0  # done

@@ -66,6 +66,10 @@ class LossWeights:
     # colour, so the slow shading a wrong light leaves in it must go to the light. Off: measured worse
     # on every object, the fit turned the paint metal instead (README, "Three albedo priors").
     shared_albedo: float = 0.0
+    # Each ray's roughness and metallic (image_materials) and albedo chromaticity (image_albedo) held to
+    # what the image-space material network predicts at its pixel (image_materials.py; RefineConfig.material_net).
+    image_materials: float = 0.0
+    image_albedo: float = 0.0
     light_seen: float = 0.2
     light_smooth: float = 0.02
     # The fitted light's colour held neutral where no photo saw it (PanoramaLighting.neutrality_loss).
@@ -139,6 +143,8 @@ class RefineConfig:
     # The material prior holds roughness and metallic to the starting field's where that is a
     # prediction (LIRM, an earlier refinement) rather than to 0.5 and 0 (README: what it was worth).
     anchor_materials: bool = True
+    # The image-space material network the image_materials / image_albedo terms read ("": the shipped one).
+    material_net: str = ""
     losses: LossWeights = field(default_factory=LossWeights)
 
     def __post_init__(self) -> None:

@@ -14,6 +14,7 @@ from lirm.engine.lighting.split_sum_shading import shade
 
 from .albedo_smoothness import albedo_difference
 from .config import CURVATURE_STEP, LossWeights
+from .image_materials import image_material_terms
 from .outside_bounds import OutsideBounds
 from .ray_rendering import RayBatchRender
 from .shared_materials import ALBEDO_SIGMA, shared_albedo_loss, shared_material_loss
@@ -49,7 +50,8 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
                volume_points: torch.Tensor | None = None, floor=None,
                floor_points: torch.Tensor | None = None,
                pairs: torch.Tensor | None = None,
-               outside_points: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, float]]:
+               outside_points: torch.Tensor | None = None,
+               material_targets: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, float]]:
     """With `lighting` (a PanoramaLighting) and the rays' `directions`, the inverse-rendering terms too.
     `material_anchor` (points -> roughness, metallic): what the material prior holds the field to at
     the surface points, e.g. the LIRM prediction the fit started from; without it the prior is the
@@ -58,7 +60,8 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
     `floor_points` below it: the floor term. `pairs`: (P, 2) batch positions of nearby rays of one
     view, for the albedo smoothness term (with the inverse rendering). `outside_points`: (K, 4) points
     outside the sampling grid with the SDF's lower bound at each (outside_bounds.py), for the term
-    that keeps the field empty where the fit never renders."""
+    that keeps the field empty where the fit never renders. `material_targets`: (N, 5) the material
+    network's metallic, roughness and albedo at each ray's pixel (image_materials.py)."""
     terms: dict[str, torch.Tensor] = {}
     terms["colour"] = (render.colour - colours).abs().mean()
     if lighting is not None:
@@ -67,7 +70,9 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
                                              share_metallic=weights.share_metallic, sigma=weights.shared_albedo_sigma,
                                              unshaded_albedo=weights.albedo_unshaded > 0,
                                              shared_albedo=weights.shared_albedo > 0,
-                                             light_neutral=weights.light_neutral > 0))
+                                             light_neutral=weights.light_neutral > 0,
+                                             material_targets=material_targets if weights.image_materials or weights.image_albedo else None,
+                                             image_albedo=weights.image_albedo > 0))
         if weights.albedo_pairs and pairs is not None and pairs.shape[0]:
             terms["albedo_pairs"] = paired_albedo_smoothness(render, colours, alphas, pairs, lighting.camera_response)
         weights = replace(weights, albedo=0.0)  # the albedo is fitted through the shading, not to the colour
@@ -143,7 +148,8 @@ def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alpha
                             directions: torch.Tensor, delit: bool = False,
                             shared_materials: bool = False, share_metallic: bool = True,
                             sigma: float = ALBEDO_SIGMA, unshaded_albedo: bool = False, shared_albedo: bool = False,
-                            light_neutral: bool = False) -> dict[str, torch.Tensor]:
+                            light_neutral: bool = False, material_targets: torch.Tensor | None = None,
+                            image_albedo: bool = False) -> dict[str, torch.Tensor]:
     """The PBR materials at the rays' surfaces shaded under `lighting` (the renderer's split-sum model),
     through the camera's tone curve, against the photo, where both say object; and the lighting's own
     terms (what the backgrounds saw, smoothness)."""
@@ -162,6 +168,8 @@ def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alpha
     normal, view = render.normal[solid], -directions[solid]
     shaded = shade(lighting, albedo, roughness, metallic, normal, view).radiance
     terms["pbr"] = (radiance_to_display_torch(shaded, lighting.camera_response) - colours[solid]).abs().mean()
+    if material_targets is not None:
+        terms.update(image_material_terms(roughness, metallic, albedo, material_targets[solid], image_albedo))
     if shared_materials:
         terms["shared_materials"] = shared_material_loss(albedo, roughness, metallic if share_metallic else None, sigma)
     if shared_albedo:

@@ -20,6 +20,7 @@ import torch
 from lirm.engine.model.occupancy_grid import OccupancyGrid
 
 from .config import RefineConfig
+from .image_materials import pixel_material_targets
 from .objective import batch_loss
 from .outside_bounds import OutsideBounds
 from .ray_rendering import render_ray_batch, with_sdf_normals
@@ -118,6 +119,9 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
     anchor = _material_anchor(refinable.frozen_field(), device) if start_has_materials and config.anchor_materials else None
     floor = UnseenFloor(grid, refinable.config.radius) if config.losses.floor else None
     outside = OutsideBounds(grid) if config.losses.outside_bounds and grid is not None else None
+    material_targets = None
+    if lighting is not None and (config.losses.image_materials or config.losses.image_albedo):
+        material_targets = pixel_material_targets(views.images, views.masks, config.material_net or None)
     refinable.resample_planes(resolutions[0])
     optimiser = _optimiser(refinable, config, lighting)
     stage = 0
@@ -181,7 +185,8 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
                                      shading, directions, anchor,
                                      _volume_points(grid, config, generator, device) if config.losses.volume else None,
                                      floor, floor.points_below(config.eikonal_points, generator, device) if carve else None,
-                                     pairs, outside.points(config.eikonal_points // 2, generator, device) if outside else None)
+                                     pairs, outside.points(config.eikonal_points // 2, generator, device) if outside else None,
+                                     material_targets[index].to(device) if material_targets is not None else None)
             optimiser.zero_grad(set_to_none=True)
             loss.backward()
             optimiser.step()

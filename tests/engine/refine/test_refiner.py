@@ -149,7 +149,7 @@ def test_a_predicted_material_is_kept_where_the_photos_say_nothing(sphere_views)
     assert roughness[False][0] > roughness[True][0] + 0.1 and roughness[False][1] < roughness[True][1] - 0.2, roughness
 
 
-def _refined_with_terms(sphere_views, inverse_rendering: bool = True, **weights):
+def _refined_with_terms(sphere_views, inverse_rendering: bool = True, material_net: str = "", **weights):
     """Ten steps from the tiny field on the sphere's views with the given loss weights; with
     `inverse_rendering`, the materials fitted from the first step under an 8 x 16 studio panorama.
     Returns (the result, the lighting or None)."""
@@ -159,7 +159,7 @@ def _refined_with_terms(sphere_views, inverse_rendering: bool = True, **weights)
     hull = initial_fields.masks_hull(sphere_views, 32, 1.0)
     grid = initial_fields.sampling_grid(hull, 1.0, 1)
     lighting = None
-    config = replace(SMALL, iterations=10, losses=replace(SMALL.losses, **weights))
+    config = replace(SMALL, iterations=10, losses=replace(SMALL.losses, **weights), material_net=material_net)
     if inverse_rendering:
         lighting = PanoramaLighting.from_environment(make_procedural_environment("studio", width=64), height=8)
         config = replace(config, inverse_rendering=True, pbr_start=0.0)
@@ -190,6 +190,18 @@ def test_the_inverse_rendering_keeps_the_albedo_from_following_the_normal(sphere
     result, _ = _refined_with_terms(sphere_views, albedo_unshaded=1.0)
     unshaded = _term_values(result, "albedo_unshaded")
     assert unshaded and all(np.isfinite(v) and v >= 0 for v in unshaded), result.history
+
+
+def test_the_inverse_rendering_holds_the_materials_to_the_material_networks(sphere_views, tmp_path):
+    """With the image-space material terms on, both are in the loss of every step of the inverse rendering."""
+    from lirm.engine.model.material_net import PRESETS, MaterialNet, save_material_net
+
+    torch.manual_seed(0)
+    path = save_material_net(MaterialNet(PRESETS["small"]), tmp_path / "materials.safetensors")
+    result, _ = _refined_with_terms(sphere_views, material_net=str(path), image_materials=1.0, image_albedo=1.0)
+    for name in ("image_materials", "image_albedo"):
+        values = _term_values(result, name)
+        assert values and all(np.isfinite(v) and v > 0 for v in values), result.history
 
 
 def test_the_albedo_smoothness_term_is_in_the_loss(sphere_views):

@@ -1,0 +1,50 @@
+"""The image-space material prior as a refinement term: each ray's surface materials held to what the
+material network (model/material_net.py) predicts at that ray's pixel of its photo.
+
+The photometric term alone cannot tell a gold line from a dark paint (README, "How much of the
+roughness and metallic the fit knows"); the network has seen many painted and metal objects and
+can. Predicted once per view before the fit, then read per ray like the photo's colour.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from lirm.engine.errors import LirmUserError
+from lirm.engine.model.material_net import load_material_net, predict_materials
+
+SHIPPED_NAME = "material-net.safetensors"
+
+
+def shipped_material_net() -> Path | None:
+    path = Path(str(resources.files("lirm.resources"))) / "checkpoints" / SHIPPED_NAME
+    return path if path.is_file() else None
+
+
+def pixel_material_targets(images: np.ndarray, masks: np.ndarray, net_path: str | Path | None = None) -> torch.Tensor:
+    """(V*H*W, 5) per pixel: metallic, roughness, linear albedo, flattened in RefineViews' order, from
+    the network at `net_path` or the shipped one."""
+    path = Path(net_path) if net_path else shipped_material_net()
+    if path is None:
+        raise LirmUserError(f"the image-space material prior is on but no network ships in resources/checkpoints/{SHIPPED_NAME}; "
+                            "train one with `lirm train-materials` or turn the prior off (--option losses.image_materials=0)")
+    net, _ = load_material_net(path)
+    maps = predict_materials(net, images, masks)
+    flat = np.concatenate([maps.metallic[..., None], maps.roughness[..., None], maps.albedo], axis=-1)
+    return torch.from_numpy(np.ascontiguousarray(flat.reshape(-1, 5), dtype=np.float32))
+
+
+def image_material_terms(roughness: torch.Tensor, metallic: torch.Tensor, albedo: torch.Tensor, targets: torch.Tensor,
+                         with_albedo: bool) -> dict[str, torch.Tensor]:
+    """L1 of the solid rays' (opacity-normalised) roughness and metallic against the network's; with
+    `with_albedo`, also of the albedo's chromaticity (its brightness is the lighting's to share)."""
+    terms = {"image_materials": (metallic - targets[:, 0]).abs().mean() + (roughness - targets[:, 1]).abs().mean()}
+    if with_albedo:
+        chroma = albedo / albedo.sum(-1, keepdim=True).clamp(min=1e-3)
+        target = targets[:, 2:5] / targets[:, 2:5].sum(-1, keepdim=True).clamp(min=1e-3)
+        terms["image_albedo"] = (chroma - target).abs().sum(-1).mean()
+    return terms

@@ -1,0 +1,47 @@
+"""Training the image-space material network: it learns a material the photos show, and stops when cancelled."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lirm.engine.model.material_net import PRESETS, predict_materials
+from lirm.engine.train.material_net_training import MaterialData, MaterialTrainingConfig, train_material_net
+
+
+def _photos(count: int, size: int) -> tuple[np.ndarray, np.ndarray]:
+    masks = np.zeros((count, size, size), np.float32)
+    masks[:, size // 4: 3 * size // 4, size // 4: 3 * size // 4] = 1.0
+    return np.where(masks[..., None] > 0, 0.5, 1.0).astype(np.float32) * np.ones(3, np.float32), masks
+
+
+def test_training_learns_which_paint_is_metal():
+    """Red squares are metal and blue ones paint: a short training must tell them apart."""
+    rng = np.random.default_rng(2)
+    count, size = 24, 32
+    images, masks = _photos(count, size)
+    red = rng.uniform(size=count) < 0.5
+    colour = np.where(red[:, None], [0.8, 0.1, 0.1], [0.1, 0.1, 0.8]).astype(np.float32)
+    images = np.where(masks[..., None] > 0, colour[:, None, None, :], 1.0).astype(np.float32)
+    metallic = masks * red[:, None, None]
+    data = MaterialData(images, masks, np.where(masks[..., None] > 0, colour[:, None, None, :], 0.0).astype(np.float32),
+                        np.full_like(masks, 0.5), metallic.astype(np.float32))
+    config = MaterialTrainingConfig(steps=60, batch=6, learning_rate=5e-3)
+    net, history = train_material_net(data, config, PRESETS["small"])
+    assert len(history) == 60 and history[-1]["metallic"] < 0.5 * history[0]["metallic"]
+    maps = predict_materials(net, images, masks)
+    inside = masks > 0.5
+    assert maps.metallic[red][inside[red]].mean() > 0.7
+    assert maps.metallic[~red][inside[~red]].mean() < 0.3
+
+
+def test_training_stops_when_cancelled():
+    images, masks = _photos(4, 32)
+    data = MaterialData(images, masks, np.zeros_like(images), np.zeros_like(masks), np.zeros_like(masks))
+    calls = {"n": 0}
+
+    def cancelled() -> bool:
+        calls["n"] += 1
+        return calls["n"] > 3
+
+    _, history = train_material_net(data, MaterialTrainingConfig(steps=50, batch=2), PRESETS["small"], cancelled=cancelled)
+    assert len(history) == 3
