@@ -41,6 +41,11 @@ def add_parser(subparsers) -> None:
                              "photos see through it (a cup's opening, which every mask covers; textured insides only), "
                              "and an opening whose bottom no photo saw continues down to a floor over the base "
                              "(README, 'What the photos see through the hull', 'The hollow that holds')")
+    parser.add_argument("--material-network", action="store_true",
+                        help="with --materials: also hold the metallic and the albedo's colour to what the image-space "
+                             "material network sees in each photo (resources/checkpoints/material-net.safetensors). It "
+                             "finds metal the photos alone cannot on objects like its training's (vases, mugs, toy "
+                             "blocks, bottles) and sees false metal on others (README, 'The image-space material prior')")
     parser.add_argument("--light-lobes", type=int, default=None, metavar="K",
                         help="with --materials: fit K compact lights (spherical Gaussians) beside the lighting panorama, for a "
                              "sun or lamp the photos did not see (default 1; 0: the panorama alone; README: what one was worth)")
@@ -90,6 +95,12 @@ def run(args: argparse.Namespace) -> int:
         # The hull as the masks make it, and without the term that keeps the carved space empty (the two
         # were measured together: README, "The hollow that holds").
         config = replace(config, photo_carving=False, losses=replace(config.losses, outside_bounds=0.0))
+    if args.material_network:
+        if not args.materials:
+            raise LirmUsageError("--material-network holds the materials the inverse rendering fits; add --materials")
+        from ..refine.image_materials import OPT_IN_WEIGHTS
+
+        config = replace(config, losses=replace(config.losses, **OPT_IN_WEIGHTS))
     source = reconstruction_model(Capture.open(args.capture), args.checkpoint)
     budget = f"{config.minutes:g} min" if config.minutes else f"{config.iterations} steps"
     print(f"refining {args.capture} on {device} for {budget} (Ctrl-C stops and keeps the best state so far)", file=sys.stderr)

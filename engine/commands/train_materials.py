@@ -33,7 +33,8 @@ def run(args: argparse.Namespace) -> int:
     import torch
 
     from ..model.material_net import PRESETS, save_material_net
-    from ..train.material_net_training import MaterialData, MaterialTrainingConfig, render_material_data, train_material_net
+    from ..train.material_net_training import (MIN_STEPS, MaterialData, MaterialTrainingConfig, render_material_data,
+                                               train_material_net)
 
     require_range(args, "scenes", (1, 100000))
     require_range(args, "eval_objects", (0, 1000))
@@ -43,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
         net, _ = load_material_net(args.eval_only)
         _print_scores(net, max(args.eval_objects, 1))
         return 0
-    require_range(args, "steps", (1, 1000000))
+    require_range(args, "steps", (MIN_STEPS, 1000000))
     if args.out.suffix != ".safetensors":
         from ..errors import LirmUsageError
 

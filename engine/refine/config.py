@@ -66,9 +66,15 @@ class LossWeights:
     # colour, so the slow shading a wrong light leaves in it must go to the light. Off: measured worse
     # on every object, the fit turned the paint metal instead (README, "Three albedo priors").
     shared_albedo: float = 0.0
-    # Each ray's roughness and metallic (image_materials) and albedo chromaticity (image_albedo) held to
-    # what the image-space material network predicts at its pixel (image_materials.py; RefineConfig.material_net).
-    image_materials: float = 0.0
+    # Each ray's metallic, roughness and albedo chromaticity held to what the image-space material
+    # network predicts at its pixel (image_materials.py; RefineConfig.material_net). Off by default:
+    # on the held-out synthetic sets (the network's own kind of object) the metallic and the albedo's
+    # colour held at 0.1 each lift the metallic 13.8 -> 22.9 dB and the relighting 24.75 -> 25.35, but
+    # on the glTF set, objects unlike any it was trained on, it sees metal on a plain white bunny and the
+    # relighting falls 22.26 -> 20.94 (README, "The image-space material prior"). `lirm refine
+    # --material-network` turns them on (image_materials.OPT_IN_WEIGHTS).
+    image_metallic: float = 0.0
+    image_roughness: float = 0.0
     image_albedo: float = 0.0
     light_seen: float = 0.2
     light_smooth: float = 0.02

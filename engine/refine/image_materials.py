@@ -18,6 +18,9 @@ from lirm.engine.errors import LirmUserError
 from lirm.engine.model.material_net import load_material_net, predict_materials
 
 SHIPPED_NAME = "material-net.safetensors"
+# The weights `lirm refine --material-network` sets (LossWeights' names): the metallic and the albedo's
+# colour; the roughness is left to the photos (README: held too, it cost roughness PSNR).
+OPT_IN_WEIGHTS = {"image_metallic": 0.1, "image_albedo": 0.1}
 
 
 def shipped_material_net() -> Path | None:
@@ -31,7 +34,7 @@ def pixel_material_targets(images: np.ndarray, masks: np.ndarray, net_path: str 
     path = Path(net_path) if net_path else shipped_material_net()
     if path is None:
         raise LirmUserError(f"the image-space material prior is on but no network ships in resources/checkpoints/{SHIPPED_NAME}; "
-                            "train one with `lirm train-materials` or turn the prior off (--option losses.image_materials=0)")
+                            "train one with `lirm train-materials` or turn the prior off (losses.image_metallic, image_roughness and image_albedo at 0)")
     net, _ = load_material_net(path)
     maps = predict_materials(net, images, masks)
     flat = np.concatenate([maps.metallic[..., None], maps.roughness[..., None], maps.albedo], axis=-1)
@@ -40,9 +43,9 @@ def pixel_material_targets(images: np.ndarray, masks: np.ndarray, net_path: str 
 
 def image_material_terms(roughness: torch.Tensor, metallic: torch.Tensor, albedo: torch.Tensor, targets: torch.Tensor,
                          with_albedo: bool) -> dict[str, torch.Tensor]:
-    """L1 of the solid rays' (opacity-normalised) roughness and metallic against the network's; with
+    """L1 of the solid rays' (opacity-normalised) metallic and roughness against the network's; with
     `with_albedo`, also of the albedo's chromaticity (its brightness is the lighting's to share)."""
-    terms = {"image_materials": (metallic - targets[:, 0]).abs().mean() + (roughness - targets[:, 1]).abs().mean()}
+    terms = {"image_metallic": (metallic - targets[:, 0]).abs().mean(), "image_roughness": (roughness - targets[:, 1]).abs().mean()}
     if with_albedo:
         chroma = albedo / albedo.sum(-1, keepdim=True).clamp(min=1e-3)
         target = targets[:, 2:5] / targets[:, 2:5].sum(-1, keepdim=True).clamp(min=1e-3)

@@ -21,13 +21,16 @@ from lirm.engine.model.material_net import WORKING_SIZE, MaterialNet, MaterialNe
 from lirm.engine.synth.training_scenes import TrainingSceneConfig, make_training_scene
 
 
+MIN_STEPS = 20  # the learning-rate cycle's warm-up needs a few steps of its own
+
+
 @dataclass(frozen=True)
 class MaterialTrainingConfig:
     scenes: int = 500
     first_seed: int = 1000  # training scene seeds first_seed .. first_seed + scenes - 1
     views_per_scene: int = 8
     fov_deg: tuple[float, float] = (30.0, 70.0)  # around the protocol's 50 and a capture's tighter crops
-    steps: int = 2000
+    steps: int = 1500
     batch: int = 12
     learning_rate: float = 2e-3
     exposure_jitter: float = 0.15  # the photo's display values scaled by U(1 - j, 1 + j): cameras differ
@@ -90,10 +93,13 @@ def train_material_net(data: MaterialData, config: MaterialTrainingConfig, net_c
                        progress: Callable[[int, dict], None] | None = None,
                        cancelled: Callable[[], bool] | None = None) -> tuple[MaterialNet, list[dict]]:
     """The network trained for config.steps (fewer if `cancelled` says so), and its loss history."""
+    if config.steps < MIN_STEPS:
+        raise ValueError(f"the material network trains for at least {MIN_STEPS} steps, got {config.steps}")
     torch.manual_seed(config.seed)
     rng = np.random.default_rng(config.seed)
     net = MaterialNet(net_config)
     optimiser = torch.optim.AdamW(net.parameters(), lr=config.learning_rate, weight_decay=1e-4)
+    # One cycle: a warm-up over the first 5% (at least 3 steps), then a cosine down (the shipped weights' schedule).
     schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, config.learning_rate, total_steps=config.steps,
                                                    pct_start=max(0.05, 3.0 / config.steps))
     count = len(data.masks)

@@ -16,9 +16,9 @@ def test_the_terms_vanish_at_the_target_and_the_albedo_term_reads_only_chromatic
     targets = torch.tensor([[1.0, 0.2, 0.8, 0.6, 0.2], [0.0, 0.7, 0.1, 0.1, 0.1]])
     albedo = targets[:, 2:5] * torch.tensor([[0.5], [2.0]])  # brighter or darker, the same colour
     terms = image_material_terms(targets[:, 1], targets[:, 0], albedo, targets, with_albedo=True)
-    assert float(terms["image_materials"]) == pytest.approx(0.0) and float(terms["image_albedo"]) == pytest.approx(0.0, abs=1e-6)
+    assert float(terms["image_metallic"]) == float(terms["image_roughness"]) == pytest.approx(0.0) and float(terms["image_albedo"]) == pytest.approx(0.0, abs=1e-6)
     wrong = image_material_terms(targets[:, 1], 1.0 - targets[:, 0], albedo.flip(-1), targets, with_albedo=True)
-    assert float(wrong["image_materials"]) == pytest.approx(1.0) and float(wrong["image_albedo"]) > 0.1
+    assert float(wrong["image_metallic"]) == pytest.approx(1.0) and float(wrong["image_roughness"]) == pytest.approx(0.0) and float(wrong["image_albedo"]) > 0.1
     assert "image_albedo" not in image_material_terms(targets[:, 1], targets[:, 0], albedo, targets, with_albedo=False)
 
 

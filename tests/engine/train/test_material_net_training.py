@@ -45,3 +45,21 @@ def test_training_stops_when_cancelled():
 
     _, history = train_material_net(data, MaterialTrainingConfig(steps=50, batch=2), PRESETS["small"], cancelled=cancelled)
     assert len(history) == 3
+
+
+def test_the_command_renders_trains_saves_and_reuses_its_views(tmp_path, capsys):
+    from lirm.engine.cli import main
+    from lirm.engine.model.material_net import load_material_net
+
+    out, data = tmp_path / "net.safetensors", tmp_path / "views.npz"
+    args = ["train-materials", "--scenes", "2", "--steps", "20", "--preset", "small", "--eval-objects", "0", "--data", str(data)]
+    assert main(args + ["--out", str(out)]) == 0
+    assert "rendered 2/2 scenes" in capsys.readouterr().out and data.is_file()
+    net, meta = load_material_net(out)
+    assert meta["steps_done"] == 20 and meta["views"] == 16 and meta["preset"] == "small"
+    assert main(args + ["--out", str(tmp_path / "again.safetensors")]) == 0
+    assert f"reading the rendered views from {data}" in capsys.readouterr().out
+    assert main(["train-materials", "--out", str(tmp_path / "net.pt")]) == 2
+    assert main(["train-materials", "--steps", "3"]) == 2 and "--steps must be between 20" in capsys.readouterr().err
+    assert main(["train-materials", "--eval-only", str(tmp_path / "missing.safetensors")]) == 3
+    assert "missing.safetensors" in capsys.readouterr().err
