@@ -128,9 +128,9 @@ def save_material_net(net: MaterialNet, path: str | Path, metadata: dict | None 
 
     from lirm.engine.io.atomic_files import atomic_write
 
-    path = Path(path)
-    if path.suffix != ".safetensors":
-        raise LirmUserError(f"cannot save the material network to {path}: the file name must end in .safetensors")
+    from .checkpoint import require_safetensors_name
+
+    path = require_safetensors_name(path)
     tensors = {k: v.detach().cpu().contiguous().clone() for k, v in net.state_dict().items()}
     header = {"format": FORMAT, "config": json.dumps(net.config.to_dict()), "extra": json.dumps(metadata or {})}
     atomic_write(path, lambda tmp: save_file(tensors, str(tmp), metadata=header))

@@ -44,12 +44,15 @@ class ModelSource:
                 "the reconstruction will not look like the object. Pass --checkpoint PATH to a trained model.")
 
 
-def shipped_checkpoint(preset_name: str) -> Path | None:
-    name = SHIPPED.get(preset_name)
-    if name is None:
-        return None
+def shipped_file(name: str) -> Path | None:
+    """resources/checkpoints/`name` of the installed package, when it is there."""
     path = Path(str(resources.files("lirm.resources"))) / "checkpoints" / name
     return path if path.exists() else None
+
+
+def shipped_checkpoint(preset_name: str) -> Path | None:
+    name = SHIPPED.get(preset_name)
+    return None if name is None else shipped_file(name)
 
 
 def default_preset() -> str:

@@ -82,6 +82,10 @@ class LossWeights:
     # Off: measured worse on three of the four synthetic objects, whose unseen skies are not grey (README).
     light_neutral: float = 0.0
 
+    @property
+    def reads_material_network(self) -> bool:
+        return bool(self.image_metallic or self.image_roughness or self.image_albedo)
+
     def to_dict(self) -> dict:
         return asdict(self)
 

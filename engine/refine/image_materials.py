@@ -8,7 +8,6 @@ can. Predicted once per view before the fit, then read per ray like the photo's 
 
 from __future__ import annotations
 
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +15,7 @@ import torch
 
 from lirm.engine.errors import LirmUserError
 from lirm.engine.model.material_net import load_material_net, predict_materials
+from lirm.engine.model.pretrained import shipped_file
 
 SHIPPED_NAME = "material-net.safetensors"
 # The weights `lirm refine --material-network` sets (LossWeights' names): the metallic and the albedo's
@@ -24,8 +24,7 @@ OPT_IN_WEIGHTS = {"image_metallic": 0.1, "image_albedo": 0.1}
 
 
 def shipped_material_net() -> Path | None:
-    path = Path(str(resources.files("lirm.resources"))) / "checkpoints" / SHIPPED_NAME
-    return path if path.is_file() else None
+    return shipped_file(SHIPPED_NAME)
 
 
 def pixel_material_targets(images: np.ndarray, masks: np.ndarray, net_path: str | Path | None = None) -> torch.Tensor:

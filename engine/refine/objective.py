@@ -71,7 +71,7 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
                                              unshaded_albedo=weights.albedo_unshaded > 0,
                                              shared_albedo=weights.shared_albedo > 0,
                                              light_neutral=weights.light_neutral > 0,
-                                             material_targets=material_targets if weights.image_metallic or weights.image_roughness or weights.image_albedo else None,
+                                             material_targets=material_targets if weights.reads_material_network else None,
                                              image_albedo=weights.image_albedo > 0))
         if weights.albedo_pairs and pairs is not None and pairs.shape[0]:
             terms["albedo_pairs"] = paired_albedo_smoothness(render, colours, alphas, pairs, lighting.camera_response)

@@ -120,7 +120,7 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
     floor = UnseenFloor(grid, refinable.config.radius) if config.losses.floor else None
     outside = OutsideBounds(grid) if config.losses.outside_bounds and grid is not None else None
     material_targets = None
-    if lighting is not None and (config.losses.image_metallic or config.losses.image_roughness or config.losses.image_albedo):
+    if lighting is not None and config.losses.reads_material_network:
         material_targets = pixel_material_targets(views.images, views.masks, config.material_net or None)
     refinable.resample_planes(resolutions[0])
     optimiser = _optimiser(refinable, config, lighting)
