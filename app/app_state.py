@@ -84,6 +84,9 @@ class SavedChoices:
     # Refine carves the masks' hull where the photos see through it (a cup's opening) before the fit,
     # as `lirm refine` does by default; off: `--no-carve-openings`, the hull as the masks make it.
     refine_carve_openings: bool = True
+    # Refine also holds the materials to what the image-space material network reads in each photo
+    # (`lirm refine --material-network`; only with the materials): an option, as the CLI has it.
+    refine_material_network: bool = False
 
 
 @dataclass
@@ -209,6 +212,8 @@ class AppState:
         out.refine_materials = take(data, "refine_materials", "refinement of the materials", _bool, defaults.refine_materials)
         out.refine_carve_openings = take(data, "refine_carve_openings", "carving of openings", _bool,
                                          defaults.refine_carve_openings)
+        out.refine_material_network = take(data, "refine_material_network", "the material network", _bool,
+                                           defaults.refine_material_network)
         view = take(data, "view", "viewport settings", _section, {})
         v, dv = out.view, defaults.view
         v.channel = take(view, "channel", "viewport channel", lambda x: _one_of(x, CHANNELS), dv.channel)

@@ -46,6 +46,12 @@ class ReconstructPanel:
         saved_choice_checkbox(state, "refine the materials too (for relighting)", "refine_materials",
                               "Refine also inverse-renders albedo, roughness and metallic under the lighting the photos\n"
                               "were taken in, so the asset relights without the photos' shading baked in.")
+        imgui.begin_disabled(not state.choices.refine_materials)
+        saved_choice_checkbox(state, "also read them with the material network", "refine_material_network",
+                              "With the materials: each photo's metal and paint colour as the image-space material network\n"
+                              "sees them hold the fit's (lirm refine --material-network). It finds thin metal lines the\n"
+                              "photos alone cannot, but it knows only the objects it was trained on: look at the result.")
+        imgui.end_disabled()
         saved_choice_checkbox(state, "open what the photos see into (a cup's inside)", "refine_carve_openings",
                               "Before the fit, Refine carves the masks' outline hull where the photos see through it\n"
                               "(a mug's opening, which every silhouette covers) and continues the inside down to a floor.\n"

@@ -11,20 +11,37 @@ from pathlib import Path
 
 from .common import require_range
 
-DEFAULT_OUT = Path("resources/checkpoints/material-net.safetensors")
+
+
+def default_out() -> Path:
+    """The installed package's own checkpoint, which `lirm refine --material-network` reads (not a path
+    relative to wherever the command is run)."""
+    from importlib import resources
+
+    from ..refine.image_materials import SHIPPED_NAME
+
+    return Path(str(resources.files("lirm.resources"))) / "checkpoints" / SHIPPED_NAME
 
 
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
         "train-materials", help="train the image-space material prior that the refinement's materials lean on (CPU, ~30 min)")
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"where the weights go (default {DEFAULT_OUT})")
-    parser.add_argument("--scenes", type=int, default=500, help="training scenes to render, 8 views each (default 500)")
+    parser.add_argument("--out", type=Path, help="where the weights go (default: the package's resources/checkpoints/"
+                        "material-net.safetensors, the one `lirm refine --material-network` reads)")
+    parser.add_argument("--scenes", type=int, default=500, help="the LIRM prior's training scenes to render, 8 views each (default 500)")
+    parser.add_argument("--varied-scenes", type=int, default=0,
+                        help="scenes of varied materials and shapes (blobs, tori, objects with no metal or all metal) to render "
+                             "after them, 8 views each (default 0: measured, not worth it yet; README)")
     parser.add_argument("--steps", type=int, default=1500, help="optimiser steps of 12 views (default 1500)")
     parser.add_argument("--preset", choices=("default", "small"), default="default", help="network size")
     parser.add_argument("--data", type=Path, help="keep the rendered views in this .npz and reuse it when it exists")
     parser.add_argument("--history", type=Path, help="also write the loss per step here (JSON)")
     parser.add_argument("--eval-objects", type=int, default=8,
                         help="score the trained network on this many held-out synthetic objects' input views (default 8; 0: none)")
+    parser.add_argument("--eval-set", choices=("synthetic", "gltf"), default="synthetic",
+                        help="score on the held-out synthetic objects or on the glTF set's models (default synthetic)")
+    parser.add_argument("--models", type=Path, default=Path("../shared/data/pbr_models"), help="glTF folder of the gltf set")
+    parser.add_argument("--environments", type=Path, default=Path("../shared/data/envmaps"), help="HDR folder of the gltf set")
     parser.add_argument("--eval-only", type=Path, metavar="WEIGHTS", help="instead: only score these weights")
     parser.set_defaults(run=run)
 
@@ -36,20 +53,26 @@ def run(args: argparse.Namespace) -> int:
     from ..train.material_net_training import (MIN_STEPS, MaterialData, MaterialTrainingConfig, render_material_data,
                                                train_material_net)
 
-    require_range(args, "scenes", (1, 100000))
+    require_range(args, "scenes", (0, 100000))
+    require_range(args, "varied_scenes", (0, 100000))
     require_range(args, "eval_objects", (0, 1000))
     if args.eval_only is not None:
         from ..model.material_net import load_material_net
 
         net, _ = load_material_net(args.eval_only)
-        _print_scores(net, max(args.eval_objects, 1))
+        _print_scores(net, args, max(args.eval_objects, 1))
         return 0
     require_range(args, "steps", (MIN_STEPS, 1000000))
+    args.out = args.out if args.out is not None else default_out()
     if args.out.suffix != ".safetensors":
         from ..errors import LirmUsageError
 
         raise LirmUsageError(f"--out {args.out}: the file name must end in .safetensors")
-    config = replace(MaterialTrainingConfig(), scenes=args.scenes, steps=args.steps)
+    if args.scenes + args.varied_scenes == 0:
+        from ..errors import LirmUsageError
+
+        raise LirmUsageError("--scenes 0 --varied-scenes 0: nothing to train on; render at least one scene")
+    config = replace(MaterialTrainingConfig(), scenes=args.scenes, varied_scenes=args.varied_scenes, steps=args.steps)
     if args.data is not None and args.data.is_file():
         print(f"reading the rendered views from {args.data}", flush=True)
         data = MaterialData.load(args.data)
@@ -87,26 +110,33 @@ def run(args: argparse.Namespace) -> int:
         args.history.write_text(json.dumps(history))
     print(f"wrote {args.out} ({len(history)} steps{', stopped early' if stop['asked'] else ''})")
     if args.eval_objects:
-        _print_scores(net, args.eval_objects)
+        _print_scores(net, args, args.eval_objects)
     return 0
 
 
-def _print_scores(net, count: int) -> None:
-    from ..evaluation.heldout_sets import synthetic_heldout
+def _print_scores(net, args: argparse.Namespace, count: int) -> None:
+    from ..evaluation.heldout_sets import gltf_heldout, synthetic_heldout
+    from ..synth.asset_folders import scan_environment_folder, scan_model_folder
     from ..train.material_net_training import heldout_material_scores
     from lirm.renderer.context import create_headless_context
     from lirm.renderer.pbr_renderer import PBRRenderer
 
+    if args.eval_set == "gltf":  # read (and refused, naming the folder) before the renderer starts
+        models, environments = scan_model_folder(args.models), scan_environment_folder(args.environments)
     context = create_headless_context()
     renderer = PBRRenderer(context)
     try:
-        objects = synthetic_heldout(renderer, count, 128, surface_points=100)
+        if args.eval_set == "gltf":
+            objects = gltf_heldout(renderer, models.usable, environments.usable, 128, surface_points=100)
+        else:
+            objects = synthetic_heldout(renderer, count, 128, surface_points=100)
     finally:
         renderer.release()
         context.release()
     rows = heldout_material_scores(net, objects)
     keys = ("metallic_psnr", "metallic_psnr_none", "roughness_psnr", "albedo_psnr")
-    print("\nthe network on the held-out synthetic objects' 16 input views (PSNR, dB; 'none': metallic 0 everywhere):")
+    where = "the glTF set's models'" if args.eval_set == "gltf" else "the held-out synthetic objects'"
+    print(f"\nthe network on {where} 16 input views (PSNR, dB; 'none': metallic 0 everywhere):")
     print("| object | metallic | metallic (none) | roughness | albedo |\n|---|---|---|---|---|")
     for row in rows + [{"object": "mean", **{k: float(sum(r[k] for r in rows) / len(rows)) for k in keys}}]:
         print(f"| {row['object']} | " + " | ".join(f"{row[k]:.2f}" for k in keys) + " |")

@@ -1,9 +1,11 @@
 """Training the image-space material prior (model/material_net.py) on the CPU.
 
 The data are the training scenes of synth/training_scenes.py (the same generator, seeds and
-augmentations the LIRM prior trains on; the held-out sets' variants are never drawn), rendered as
-whole frames at the working size with a field of view near the protocol's, each view with its true
-albedo, roughness and metallic. Losses on the object's pixels: binary cross-entropy of the metallic,
+augmentations the LIRM prior trains on; the held-out sets' variants are never drawn), optionally with
+scenes of varied materials and shapes after them (synth/material_variety.py: objects without metal,
+all-metal ones, blobs and tori, re-rigged lighting; measured, and off by default), rendered as whole
+frames at the working size with a field of view near the protocol's, each view with its true albedo,
+roughness and metallic. Losses on the object's pixels: binary cross-entropy of the metallic,
 L1 of the roughness and of the linear albedo.
 """
 
@@ -18,6 +20,7 @@ import torch
 import torch.nn.functional as F
 
 from lirm.engine.model.material_net import WORKING_SIZE, MaterialNet, MaterialNetConfig, network_input
+from lirm.engine.synth.material_variety import make_varied_scene
 from lirm.engine.synth.training_scenes import TrainingSceneConfig, make_training_scene
 
 
@@ -28,6 +31,9 @@ MIN_STEPS = 20  # the learning-rate cycle's warm-up needs a few steps of its own
 class MaterialTrainingConfig:
     scenes: int = 500
     first_seed: int = 1000  # training scene seeds first_seed .. first_seed + scenes - 1
+    # Scenes of synth/material_variety.py, seeds 0 .. varied_scenes - 1, after those. 0 by default: 500 of
+    # them beside the 500 cost the network most of what it knew and taught it little (README, "Varied scenes").
+    varied_scenes: int = 0
     views_per_scene: int = 8
     fov_deg: tuple[float, float] = (30.0, 70.0)  # around the protocol's 50 and a capture's tighter crops
     steps: int = 1500
@@ -65,13 +71,17 @@ def render_material_data(config: MaterialTrainingConfig, progress: Callable[[int
     context = create_headless_context()
     renderer = PBRRenderer(context)
     maps: dict[str, list[np.ndarray]] = {k: [] for k in ("image", "mask", "albedo", "roughness", "metallic")}
+    total = config.scenes + config.varied_scenes
     try:
-        for k in range(config.scenes):
-            views = make_training_scene(renderer, config.first_seed + k, scene_config).views
+        for k in range(total):
+            if k < config.scenes:
+                views = make_training_scene(renderer, config.first_seed + k, scene_config).views
+            else:
+                views = make_varied_scene(renderer, k - config.scenes, scene_config).views
             for name in maps:
                 maps[name].append(getattr(views, name).astype(np.float16))
             if progress:
-                progress(k + 1, config.scenes)
+                progress(k + 1, total)
     finally:
         renderer.release()
         context.release()

@@ -103,7 +103,8 @@ def test_old_absolute_paths_into_another_capture_are_rebased_or_dropped(tmp_path
 
 @pytest.mark.parametrize("section, key, bad", [
     (None, "selected", "0001"), (None, "selected", [1, 2]), (None, "viewing_update", "latest"), (None, "viewing_update", -1),
-    (None, "auto_update", "yes"), (None, "refine_minutes", None), (None, "refine_materials", "on"), (None, "refine_carve_openings", 1), ("view", "channel", "xray"), ("view", "channel", 3),
+    (None, "auto_update", "yes"), (None, "refine_minutes", None), (None, "refine_materials", "on"), (None, "refine_carve_openings", 1),
+    (None, "refine_material_network", "yes"), ("view", "channel", "xray"), ("view", "channel", 3),
     ("view", "environment", "moon"), ("view", "environment", "/nowhere/gone.hdr"), ("view", "environment", None),
     ("view", "rotation_deg", "north"), ("view", "exposure_ev", float("nan")), ("view", "exposure_ev", 1e9),
     ("view", "background", 1), ("view", "show_cameras", None), ("view", "show_coverage", "no"),
@@ -114,7 +115,7 @@ def test_old_absolute_paths_into_another_capture_are_rebased_or_dropped(tmp_path
 def test_a_value_that_cannot_be_restored_is_dropped_with_a_message(tmp_path, section, key, bad):
     capture = _capture(tmp_path / "capture")
     good = {"selected": ["0002"], "viewing_update": 1, "auto_update": True, "refine_minutes": 2.0, "refine_materials": False,
-            "refine_carve_openings": False,
+            "refine_carve_openings": False, "refine_material_network": True,
             "view": {"channel": "normal", "environment": "overcast", "rotation_deg": 45.0, "exposure_ev": 1.0, "background": False,
                      "show_cameras": False, "show_coverage": True},
             "export": {"path": "export/mine.glb", "faces": 5000, "texture": 512, "grid": 128, "turntable_frames": 12,
