@@ -314,8 +314,8 @@ class AppActions:
                 "--grid-resolution", "64", "--live", str(live), "--live-every", "4", *self._ckpt()]
         if self.state.choices.refine_materials:
             args.append("--materials")
-            if self.state.choices.refine_material_network:
-                args.append("--material-network")
+            if not self.state.choices.refine_material_network:
+                args += ["--material-network", "off"]
         if not self.state.choices.refine_carve_openings:
             args.append("--no-carve-openings")
         return args

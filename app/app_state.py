@@ -84,9 +84,9 @@ class SavedChoices:
     # Refine carves the masks' hull where the photos see through it (a cup's opening) before the fit,
     # as `lirm refine` does by default; off: `--no-carve-openings`, the hull as the masks make it.
     refine_carve_openings: bool = True
-    # Refine also holds the materials to what the image-space material network reads in each photo
-    # (`lirm refine --material-network`; only with the materials): an option, as the CLI has it.
-    refine_material_network: bool = False
+    # Refine also holds the materials to what the image-space material network reads in each photo, when
+    # its check says it knows them (`lirm refine`'s default, `--material-network auto`); off: `off`.
+    refine_material_network: bool = True
 
 
 @dataclass

@@ -49,8 +49,9 @@ class ReconstructPanel:
         imgui.begin_disabled(not state.choices.refine_materials)
         saved_choice_checkbox(state, "also read them with the material network", "refine_material_network",
                               "With the materials: each photo's metal and paint colour as the image-space material network\n"
-                              "sees them hold the fit's (lirm refine --material-network). It finds thin metal lines the\n"
-                              "photos alone cannot, but it knows only the objects it was trained on: look at the result.")
+                              "sees them hold the fit's. It finds thin metal lines the photos alone cannot, but it knows only\n"
+                              "objects like the ones it was trained on, so it is heard only when its metal holds still as the\n"
+                              "photos are mirrored and their exposure moved (the refinement's notes say which). Off: never.")
         imgui.end_disabled()
         saved_choice_checkbox(state, "open what the photos see into (a cup's inside)", "refine_carve_openings",
                               "Before the fit, Refine carves the masks' outline hull where the photos see through it\n"

@@ -9,6 +9,7 @@ from pathlib import Path
 from .. import progress_events
 from ..errors import LirmUsageError, LirmUserError
 from ..progress_lines import progress_bar
+from ..refine.config import MATERIAL_NETWORK_USES
 from .common import check_output, check_render_memory, check_render_options, require_at_least_one, require_capture
 
 
@@ -41,11 +42,12 @@ def add_parser(subparsers) -> None:
                              "photos see through it (a cup's opening, which every mask covers; textured insides only), "
                              "and an opening whose bottom no photo saw continues down to a floor over the base "
                              "(README, 'What the photos see through the hull', 'The hollow that holds')")
-    parser.add_argument("--material-network", action="store_true",
-                        help="with --materials: also hold the metallic and the albedo's colour to what the image-space "
-                             "material network sees in each photo (resources/checkpoints/material-net.safetensors). It "
-                             "finds metal the photos alone cannot on objects like its training's (vases, mugs, toy "
-                             "blocks, bottles) and sees false metal on others (README, 'The image-space material prior')")
+    parser.add_argument("--material-network", choices=MATERIAL_NETWORK_USES, default="auto",
+                        help="with --materials: hold the metallic and the albedo's colour to what the image-space material "
+                             "network (resources/checkpoints/material-net.safetensors) sees in each photo. It finds metal the "
+                             "photos alone cannot on objects like its training's (vases, mugs, toy blocks, bottles) and false "
+                             "metal on others: 'auto' (default) only when its metal holds still as the photos are mirrored and "
+                             "their exposure moved, 'on' always, 'off' never (README, 'Does the network know these photos?')")
     parser.add_argument("--light-lobes", type=int, default=None, metavar="K",
                         help="with --materials: fit K compact lights (spherical Gaussians) beside the lighting panorama, for a "
                              "sun or lamp the photos did not see (default 1; 0: the panorama alone; README: what one was worth)")
@@ -95,12 +97,9 @@ def run(args: argparse.Namespace) -> int:
         # The hull as the masks make it, and without the term that keeps the carved space empty (the two
         # were measured together: README, "The hollow that holds").
         config = replace(config, photo_carving=False, losses=replace(config.losses, outside_bounds=0.0))
-    if args.material_network:
-        if not args.materials:
-            raise LirmUsageError("--material-network holds the materials the inverse rendering fits; add --materials")
-        from ..refine.image_materials import OPT_IN_WEIGHTS
-
-        config = replace(config, losses=replace(config.losses, **OPT_IN_WEIGHTS))
+    if args.material_network == "on" and not args.materials:
+        raise LirmUsageError("--material-network on holds the materials the inverse rendering fits; add --materials")
+    config = replace(config, material_network=args.material_network)
     source = reconstruction_model(Capture.open(args.capture), args.checkpoint)
     budget = f"{config.minutes:g} min" if config.minutes else f"{config.iterations} steps"
     print(f"refining {args.capture} on {device} for {budget} (Ctrl-C stops and keeps the best state so far)", file=sys.stderr)

@@ -188,6 +188,8 @@ def _refine_locked(capture_dir, source: ModelSource, config: RefineConfig, init:
         if live_path is not None:
             Path(live_path).unlink(missing_ok=True)
     field = result.field.frozen_field()
+    if result.material_network:
+        notes.append(result.material_network)
 
     number = len(capture.updates) + 1
     with HistoryBuild(capture) as build:
@@ -201,7 +203,8 @@ def _refine_locked(capture_dir, source: ModelSource, config: RefineConfig, init:
         record = {"update": number, "kind": "refine", "frames": fitted, "held_out": held, "started_from": started_from,
                   "init": init, "seconds": round(result.seconds, 2), "steps": result.steps, "stopped": result.stopped,
                   "best_step": result.best_step, "best_loss": result.best_loss, "holdout": holdout,
-                  "settings": config.to_dict(), "losses": result.history, "notes": notes}
+                  "settings": config.to_dict(), "losses": result.history, "notes": notes,
+                  "material_network": result.material_network}
         atomic_write_json(folder / "refine.json", record)
         if result.lighting is not None:
             _save_fitted_lighting(result.lighting, folder)

@@ -67,15 +67,15 @@ class LossWeights:
     # on every object, the fit turned the paint metal instead (README, "Three albedo priors").
     shared_albedo: float = 0.0
     # Each ray's metallic, roughness and albedo chromaticity held to what the image-space material
-    # network predicts at its pixel (image_materials.py; RefineConfig.material_net). Off by default:
-    # on the held-out synthetic sets (the network's own kind of object) the metallic and the albedo's
-    # colour held at 0.1 each lift the metallic 13.8 -> 22.9 dB and the relighting 24.75 -> 25.35, but
-    # on the glTF set, objects unlike any it was trained on, it sees metal on a plain white bunny and the
-    # relighting falls 22.26 -> 20.94 (README, "The image-space material prior"). `lirm refine
-    # --material-network` turns them on (image_materials.OPT_IN_WEIGHTS).
-    image_metallic: float = 0.0
+    # network predicts at its pixel (image_materials.py; RefineConfig.material_network says when). On the
+    # held-out synthetic sets (the network's own kind of object) the metallic and the albedo's colour held
+    # at 0.1 each lift the metallic 13.8 -> 22.9 dB and the relighting 24.75 -> 25.35; on the glTF set,
+    # objects unlike any it was trained on, it sees metal on a plain white bunny and the relighting fell
+    # 22.26 -> 20.94, which its familiarity check now prevents (README, "The image-space material prior",
+    # "Does the network know these photos?"). The roughness stays the photos' (held too, it cost roughness).
+    image_metallic: float = 0.1
     image_roughness: float = 0.0
-    image_albedo: float = 0.0
+    image_albedo: float = 0.1
     light_seen: float = 0.2
     light_smooth: float = 0.02
     # The fitted light's colour held neutral where no photo saw it (PanoramaLighting.neutrality_loss).
@@ -88,6 +88,9 @@ class LossWeights:
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+
+MATERIAL_NETWORK_USES = ("auto", "on", "off")
 
 
 @dataclass(frozen=True)
@@ -155,6 +158,9 @@ class RefineConfig:
     anchor_materials: bool = True
     # The image-space material network the image_materials / image_albedo terms read ("": the shipped one).
     material_net: str = ""
+    # When the fit listens to it: "auto" only on photos it knows (model/material_net_familiarity.py: its
+    # metal stable under a mirror flip and the training's exposure range), "on" always, "off" never.
+    material_network: str = "auto"
     losses: LossWeights = field(default_factory=LossWeights)
 
     def __post_init__(self) -> None:
@@ -162,6 +168,8 @@ class RefineConfig:
             raise ValueError(f"the time budget must be positive, got {self.minutes} minutes")
         if self.iterations < 1:
             raise ValueError(f"iterations must be at least 1, got {self.iterations}")
+        if self.material_network not in MATERIAL_NETWORK_USES:
+            raise ValueError(f"material_network must be one of {', '.join(MATERIAL_NETWORK_USES)}, got {self.material_network!r}")
         if self.rays_per_step < 16:
             raise ValueError(f"rays per step must be at least 16, got {self.rays_per_step}")
         if not self.plane_resolutions or min(self.plane_resolutions) < 8 or max(self.plane_resolutions) > 1024:

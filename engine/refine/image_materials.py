@@ -15,29 +15,35 @@ import torch
 
 from lirm.engine.errors import LirmUserError
 from lirm.engine.model.material_net import load_material_net, predict_materials
+from lirm.engine.model.material_net_familiarity import material_net_familiarity
 from lirm.engine.model.pretrained import shipped_file
 
 SHIPPED_NAME = "material-net.safetensors"
-# The weights `lirm refine --material-network` sets (LossWeights' names): the metallic and the albedo's
-# colour; the roughness is left to the photos (README: held too, it cost roughness PSNR).
-OPT_IN_WEIGHTS = {"image_metallic": 0.1, "image_albedo": 0.1}
 
 
 def shipped_material_net() -> Path | None:
     return shipped_file(SHIPPED_NAME)
 
 
-def pixel_material_targets(images: np.ndarray, masks: np.ndarray, net_path: str | Path | None = None) -> torch.Tensor:
+def pixel_material_targets(images: np.ndarray, masks: np.ndarray, net_path: str | Path | None = None,
+                           check_familiarity: bool = False) -> tuple[torch.Tensor | None, str]:
     """(V*H*W, 5) per pixel: metallic, roughness, linear albedo, flattened in RefineViews' order, from
-    the network at `net_path` or the shipped one."""
+    the network at `net_path` or the shipped one, and a line saying so. With `check_familiarity`, None
+    instead where the photos are unlike the network's training (model/material_net_familiarity.py)."""
     path = Path(net_path) if net_path else shipped_material_net()
     if path is None:
         raise LirmUserError(f"the image-space material prior is on but no network ships in resources/checkpoints/{SHIPPED_NAME}; "
                             "train one with `lirm train-materials` or turn the prior off (losses.image_metallic, image_roughness and image_albedo at 0)")
     net, _ = load_material_net(path)
+    said = f"the material network used ({path.name}: on every photo, as asked)"
+    if check_familiarity:
+        familiarity = material_net_familiarity(net, images, masks)
+        said = familiarity.describe()
+        if not familiarity.familiar:
+            return None, said
     maps = predict_materials(net, images, masks)
     flat = np.concatenate([maps.metallic[..., None], maps.roughness[..., None], maps.albedo], axis=-1)
-    return torch.from_numpy(np.ascontiguousarray(flat.reshape(-1, 5), dtype=np.float32))
+    return torch.from_numpy(np.ascontiguousarray(flat.reshape(-1, 5), dtype=np.float32)), said
 
 
 def image_material_terms(roughness: torch.Tensor, metallic: torch.Tensor, albedo: torch.Tensor, targets: torch.Tensor,

@@ -53,6 +53,8 @@ class RefineResult:
     stopped: str  # "budget", "iterations" or "cancelled"
     history: list[dict] = field(default_factory=list)  # every `best_every` steps: step, seconds, loss, terms
     lighting: object | None = None  # the fitted PanoramaLighting (inverse rendering), at the best state
+    # Whether the image-space material network was listened to, and why ("": the fit never asked it).
+    material_network: str = ""
 
 
 def _optimiser(refinable: RefinableField, config: RefineConfig, lighting=None) -> torch.optim.Optimizer:
@@ -119,9 +121,10 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
     anchor = _material_anchor(refinable.frozen_field(), device) if start_has_materials and config.anchor_materials else None
     floor = UnseenFloor(grid, refinable.config.radius) if config.losses.floor else None
     outside = OutsideBounds(grid) if config.losses.outside_bounds and grid is not None else None
-    material_targets = None
-    if lighting is not None and config.losses.reads_material_network:
-        material_targets = pixel_material_targets(views.images, views.masks, config.material_net or None)
+    material_targets, material_network = None, ""
+    if lighting is not None and config.losses.reads_material_network and config.material_network != "off":
+        material_targets, material_network = pixel_material_targets(views.images, views.masks, config.material_net or None,
+                                                                    check_familiarity=config.material_network == "auto")
     refinable.resample_planes(resolutions[0])
     optimiser = _optimiser(refinable, config, lighting)
     stage = 0
@@ -233,4 +236,4 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
         if lighting is not None and best_lighting is not None:
             lighting.load_state_dict(best_lighting)
     refinable.fitted_beta = 1.0 / best_inv_beta
-    return RefineResult(refinable, step, seconds, best_step, best_loss, stopped, history, lighting)
+    return RefineResult(refinable, step, seconds, best_step, best_loss, stopped, history, lighting, material_network)

@@ -35,15 +35,15 @@ def test_refine_runs_lirm_refine_with_the_panels_choices(app, tmp_path):
     assert args[:2] == ["refine", str(tmp_path / "capture")] and args[args.index("--minutes") + 1] == "2"
     # By default: the materials, and the openings carved as `lirm refine` does on its own.
     assert "--materials" in args and "--no-carve-openings" not in args and "--material-network" not in args
-    # The material network reads the photos only with the materials, as `lirm refine` requires.
-    app.state.choices.refine_material_network = True
-    assert "--material-network" in app.refine_arguments(2.0, live)
+    # The material network as `lirm refine` has it by default (heard when its check passes), or never.
     from lirm.engine.cli import build_parser
-    assert build_parser().parse_args(app.refine_arguments(2.0, live)).material_network is True
+    assert build_parser().parse_args(args).material_network == "auto"
+    app.state.choices.refine_material_network = False
+    assert build_parser().parse_args(app.refine_arguments(2.0, live)).material_network == "off"
     app.state.choices.refine_materials = False
     app.state.choices.refine_carve_openings = False
     args = app.refine_arguments(0.5, live)
-    assert "--materials" not in args and "--no-carve-openings" in args and "--material-network" not in args
+    assert "--materials" not in args and "--no-carve-openings" in args and "--material-network" not in args  # only with materials
     # The command line the job runs is one `lirm refine` takes.
     parsed = build_parser().parse_args(args)
     assert parsed.carve_openings is False and parsed.materials is False

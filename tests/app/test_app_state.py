@@ -115,7 +115,7 @@ def test_old_absolute_paths_into_another_capture_are_rebased_or_dropped(tmp_path
 def test_a_value_that_cannot_be_restored_is_dropped_with_a_message(tmp_path, section, key, bad):
     capture = _capture(tmp_path / "capture")
     good = {"selected": ["0002"], "viewing_update": 1, "auto_update": True, "refine_minutes": 2.0, "refine_materials": False,
-            "refine_carve_openings": False, "refine_material_network": True,
+            "refine_carve_openings": False, "refine_material_network": False,
             "view": {"channel": "normal", "environment": "overcast", "rotation_deg": 45.0, "exposure_ev": 1.0, "background": False,
                      "show_cameras": False, "show_coverage": True},
             "export": {"path": "export/mine.glb", "faces": 5000, "texture": 512, "grid": 128, "turntable_frames": 12,

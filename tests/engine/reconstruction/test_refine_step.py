@@ -149,9 +149,11 @@ def test_refine_with_materials_fits_them_under_the_capture_lighting(capture, cap
     assert record["settings"]["light_lobes"] == 1  # one compact light by default
     pbr = [entry["pbr"] for entry in record["losses"] if "pbr" in entry]
     assert len(pbr) >= 2 and pbr[-1] < pbr[0], record["losses"]
-    # The image-space material network is left out unless asked for.
-    assert record["settings"]["losses"]["image_metallic"] == record["settings"]["losses"]["image_albedo"] == 0
-    assert not any("image_metallic" in entry for entry in record["losses"])
+    # The image-space material network is heard when its check on these photos passes, and the record says which.
+    assert record["settings"]["material_network"] == "auto" and "the material network" in record["material_network"]
+    heard = "material network used" in record["material_network"]
+    assert any("image_metallic" in entry for entry in record["losses"]) == heard
+    assert record["material_network"] in record["notes"]
     assert (step / "lighting.hdr").is_file() and (step / "lighting.png").is_file()
     # Its export fits the baked textures to the photos it was refined on, under that lighting, and
     # says how far the photometric error fell; --no-texture-fit keeps the field's own textures.
@@ -171,11 +173,16 @@ def test_refine_with_materials_fits_them_under_the_capture_lighting(capture, cap
     assert re.search(r"photos registered \(mean shift [\d.]+ px\)", capsys.readouterr().out)
     assert main(["export", str(capture), "-o", str(capture / "both.glb"), "--register-photos", "--no-texture-fit"] + export) == 2
     assert "leave out one of them" in capsys.readouterr().err and not (capture / "both.glb").exists()
-    # --material-network: the metallic and the albedo's colour also held to the network's, in every step of the inverse rendering.
-    assert main(["refine", str(capture), "--material-network"] + steps) == 2
+    # --material-network on: the metallic and the albedo's colour held to the network's in every step of the
+    # inverse rendering, whatever its check says; off: never.
+    assert main(["refine", str(capture), "--material-network", "on"] + steps) == 2
     assert "add --materials" in capsys.readouterr().err
-    assert main(["refine", str(capture), "--materials", "--material-network"] + steps[:1] + ["20"] + steps[2:]) == 0
+    assert main(["refine", str(capture), "--materials", "--material-network", "on"] + steps[:1] + ["20"] + steps[2:]) == 0
     record = json.loads((capture / "reconstruction" / "update_03" / "refine.json").read_text())
     assert record["settings"]["losses"]["image_metallic"] > 0 and record["settings"]["losses"]["image_albedo"] > 0
     pbr_steps = [entry for entry in record["losses"] if "pbr" in entry]
     assert pbr_steps and all("image_metallic" in e and "image_albedo" in e for e in pbr_steps), record["losses"]
+    assert "as asked" in record["material_network"]
+    assert main(["refine", str(capture), "--materials", "--material-network", "off"] + steps[:1] + ["20"] + steps[2:]) == 0
+    record = json.loads((capture / "reconstruction" / "update_04" / "refine.json").read_text())
+    assert record["material_network"] == "" and not any("image_metallic" in e for e in record["losses"])

@@ -28,7 +28,9 @@ def test_targets_follow_the_views_pixel_order(tmp_path):
     rng = np.random.default_rng(0)
     images = rng.uniform(0, 1, (2, 24, 40, 3)).astype(np.float32)
     masks = (rng.uniform(0, 1, (2, 24, 40)) > 0.3).astype(np.float32)
-    flat = pixel_material_targets(images, masks, path).numpy()
+    targets, said = pixel_material_targets(images, masks, path)
+    flat = targets.numpy()
+    assert "m.safetensors" in said
     from lirm.engine.model.material_net import load_material_net
     maps = predict_materials(load_material_net(path)[0], images, masks)
     assert flat.shape == (2 * 24 * 40, 5)

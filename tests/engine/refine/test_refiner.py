@@ -149,7 +149,8 @@ def test_a_predicted_material_is_kept_where_the_photos_say_nothing(sphere_views)
     assert roughness[False][0] > roughness[True][0] + 0.1 and roughness[False][1] < roughness[True][1] - 0.2, roughness
 
 
-def _refined_with_terms(sphere_views, inverse_rendering: bool = True, material_net: str = "", **weights):
+def _refined_with_terms(sphere_views, inverse_rendering: bool = True, material_net: str = "", material_network: str = "off",
+                        **weights):
     """Ten steps from the tiny field on the sphere's views with the given loss weights; with
     `inverse_rendering`, the materials fitted from the first step under an 8 x 16 studio panorama.
     Returns (the result, the lighting or None)."""
@@ -159,7 +160,8 @@ def _refined_with_terms(sphere_views, inverse_rendering: bool = True, material_n
     hull = initial_fields.masks_hull(sphere_views, 32, 1.0)
     grid = initial_fields.sampling_grid(hull, 1.0, 1)
     lighting = None
-    config = replace(SMALL, iterations=10, losses=replace(SMALL.losses, **weights), material_net=material_net)
+    config = replace(SMALL, iterations=10, losses=replace(SMALL.losses, **weights), material_net=material_net,
+                     material_network=material_network)
     if inverse_rendering:
         lighting = PanoramaLighting.from_environment(make_procedural_environment("studio", width=64), height=8)
         config = replace(config, inverse_rendering=True, pbr_start=0.0)
@@ -198,10 +200,27 @@ def test_the_inverse_rendering_holds_the_materials_to_the_material_networks(sphe
 
     torch.manual_seed(0)
     path = save_material_net(MaterialNet(PRESETS["small"]), tmp_path / "materials.safetensors")
-    result, _ = _refined_with_terms(sphere_views, material_net=str(path), image_metallic=1.0, image_roughness=1.0, image_albedo=1.0)
+    result, _ = _refined_with_terms(sphere_views, material_net=str(path), material_network="on", image_metallic=1.0,
+                                    image_roughness=1.0, image_albedo=1.0)
     for name in ("image_metallic", "image_roughness", "image_albedo"):
         values = _term_values(result, name)
         assert values and all(np.isfinite(v) and v > 0 for v in values), result.history
+    assert "as asked" in result.material_network
+
+
+def test_by_default_the_material_network_is_heard_only_on_photos_it_knows(sphere_views):
+    """'auto' asks the network's familiarity check first: the terms are in the loss exactly when it passes."""
+    from lirm.engine.model.material_net import load_material_net
+    from lirm.engine.model.material_net_familiarity import material_net_familiarity
+    from lirm.engine.refine.image_materials import shipped_material_net
+
+    assert SMALL.material_network == "auto" and SMALL.losses.image_metallic > 0 and SMALL.losses.image_albedo > 0
+    result, _ = _refined_with_terms(sphere_views, material_network="auto")
+    familiarity = material_net_familiarity(load_material_net(shipped_material_net())[0], sphere_views.images, sphere_views.masks)
+    assert result.material_network == familiarity.describe()
+    assert bool(_term_values(result, "image_metallic")) == familiarity.familiar
+    off, _ = _refined_with_terms(sphere_views, material_network="off")
+    assert off.material_network == "" and not _term_values(off, "image_metallic")
 
 
 def test_the_albedo_smoothness_term_is_in_the_loss(sphere_views):
