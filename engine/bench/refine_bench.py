@@ -178,6 +178,10 @@ def refine_bench_table(result: dict, set_name: str) -> str:
                   "| budget | albedo PSNR ↑ | roughness PSNR ↑ | metallic PSNR ↑ |", "|---|---|---|---|"]
         for b in result["budgets"]:
             lines.append(f"| {b['budget']} | " + " | ".join(f"{b[key]:.2f}" for key in EXPORTED_MATERIAL_KEYS) + " |")
+    heard = [r["object"] for r in first if "material network used" in r.get("material_network", "")]
+    if any(r.get("material_network") for r in first):
+        lines += ["", f"The material network was heard on {len(heard)} of {len(first)} objects"
+                  f"{': ' + ', '.join(heard) if heard else ''} (model/material_net_familiarity.py)."]
     if "machine" in result:  # fits of equal steps pair exactly only on one machine (machine_facts.py)
         lines += ["", f"Machine: {describe(result['machine'])}."]
     return "\n".join(lines) + "\n"

@@ -64,6 +64,7 @@ class RefinedObject:
     views: RefineViews  # the input views it was fitted to
     lighting: object | None  # the lighting fitted with the materials (None without them)
     start: str = ""  # where the fit started: the init asked for, or the one "auto" chose
+    material_network: str = ""  # whether the fit heard the material network, and why (RefineResult's)
 
 
 def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig, init: str, true_lighting=None,
@@ -111,7 +112,8 @@ def refine_object(model, obj: HeldoutObject, updates: int, refine: RefineConfig,
         else:
             raise ValueError(f"unknown lighting source {lighting_source!r}; choose one of: {', '.join(LIGHTING_SOURCES)}")
     result = refine_field(refinable, views, refine, grid, lighting=lighting, start_has_materials=chosen in ("lirm", "hull-lirm", "hull-lirm-footprint"))
-    return RefinedObject(result.field.frozen_field(), time.perf_counter() - start, result.steps, views, result.lighting, chosen)
+    return RefinedObject(result.field.frozen_field(), time.perf_counter() - start, result.steps, views, result.lighting, chosen,
+                         result.material_network)
 
 
 def input_lighting(obj: HeldoutObject, indices: list[int], refine: RefineConfig):
@@ -215,7 +217,8 @@ def per_object_scores(model, objects: list[HeldoutObject], config: EvalConfig, r
         keys = ("psnr", "ssim", "lpips", "albedo_psnr", "roughness_psnr", "metallic_psnr", "chamfer") + (
             RELIGHT_KEYS + ("relight_lpips",) if relighter is not None else ())
         baked = {k: float(np.mean(v)) for k, v in scores.items() if k.startswith(("baked_", "variant_", "fit_", "swap_", "exported_"))}  # RelightConfig's extras
-        rows.append({"object": obj.name, "start": refined.start, "seconds": refined.seconds, "steps": refined.steps,
+        rows.append({"object": obj.name, "start": refined.start, "material_network": refined.material_network,
+                     "seconds": refined.seconds, "steps": refined.steps,
                      **{k: row[k] for k in keys}, **baked})
     return rows
 

@@ -38,6 +38,9 @@ def test_bench_refine_with_materials_scores_them_and_draws_the_relighting(tmp_pa
     if prefix == "variant_":
         assert budget["variant_fit_seconds"] > 0 and "texture fit (s) |" in table
     assert [p.name for p in (tmp_path / "pictures").iterdir()] == ["hull_0.05_min__vase_0.png"]
+    # Whether each object's fit heard the material network, and why, is in the JSON and the table.
+    row = json.loads((tmp_path / "r.json").read_text())["budgets"][0]["objects"][0]
+    assert "the material network" in row["material_network"] and "The material network was heard on" in table
 
 
 def test_bench_refine_pictures_need_materials(tmp_path, capsys):
