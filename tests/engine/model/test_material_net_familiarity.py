@@ -15,18 +15,6 @@ def shipped_net():
     return load_material_net(shipped_material_net())[0]
 
 
-@pytest.fixture(scope="module")
-def renderer():
-    from lirm.renderer.context import create_headless_context
-    from lirm.renderer.pbr_renderer import PBRRenderer
-
-    context = create_headless_context()
-    r = PBRRenderer(context)
-    yield r
-    r.release()
-    context.release()
-
-
 def _inputs(obj):
     views = obj.views.select([i for s in obj.protocol.input_sets for i in s])
     return views.image, views.mask

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from lirm.engine.synth.material_variety import (VarietyConfig, blob_geometry, make_varied_scene, random_material,
                                                 split_into_parts, varied_meshes)
@@ -45,18 +44,6 @@ def test_every_kind_of_shape_and_paint_occurs():
             # The parts share one set of normals, so that the cuts leave no shading seam.
             assert all(m.normals is meshes[0].normals for m in meshes)
     assert kinds == {"own", "no metal", "repainted", "parts"}
-
-
-@pytest.fixture(scope="module")
-def renderer():
-    from lirm.renderer.context import create_headless_context
-    from lirm.renderer.pbr_renderer import PBRRenderer
-
-    context = create_headless_context()
-    r = PBRRenderer(context)
-    yield r
-    r.release()
-    context.release()
 
 
 def test_a_seed_is_one_scene_and_its_metal_is_in_the_gbuffer(renderer):
