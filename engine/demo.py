@@ -167,6 +167,9 @@ def _reconstruct_and_export(capture_dir: Path, asset_path: Path, config: DemoCon
         refine = refine_preset("default", minutes=config.refine_minutes, inverse_rendering=config.refine_materials)
         refined = run_refine(capture_dir, source, refine, render=pictures)
         say(f"refinement: {refined.steps} steps in {refined.seconds:.0f} s from {refined.started_from}")
+        for note in refined.notes:  # whether the material network was heard, and why (its familiarity check)
+            if "material network" in note:
+                say(note)
     if config.real_height_m:
         from .capture.real_size import set_real_size
 

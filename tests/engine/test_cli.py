@@ -200,6 +200,7 @@ def test_demo_photographs_and_captures_a_builtin_object(tmp_path):
     assert proc.returncode == 0, proc.stderr
     out = proc.stdout
     assert "demo output is in" in out
+    assert "the material network " in proc.stderr  # the refinement says whether it heard the network, and why
     overview = cv2.imread(str(tmp_path / "demo" / "overview.png"))
     assert overview.shape[0] > 0 and overview.std() > 10  # not a blank sheet
     assert len(list((tmp_path / "demo" / "photos").glob("*.jpg"))) == 16
