@@ -86,6 +86,13 @@ def check_export_memory(args: argparse.Namespace) -> None:
     check_memory(args, [("--grid", EXPORT_GRID, mesh_grid_bytes), ("--texture", TEXTURE, bake_bytes)], together=False)
 
 
+def add_gltf_set_arguments(parser: argparse.ArgumentParser) -> None:
+    """`--models` and `--environments`: where the glTF set's models and HDRIs are (lirm eval, lirm
+    bench refine, lirm train-materials); heldout_objects reads them."""
+    parser.add_argument("--models", type=Path, default=Path("../shared/data/pbr_models"), help="glTF folder of the gltf set")
+    parser.add_argument("--environments", type=Path, default=Path("../shared/data/envmaps"), help="HDR folder of the gltf set")
+
+
 def add_first_object_argument(parser: argparse.ArgumentParser) -> None:
     """`--first-object K` (lirm eval, lirm bench refine); check_first_object refuses what it cannot mean."""
     parser.add_argument("--first-object", type=int, default=0, metavar="K",

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from ..errors import LirmUsageError
-from .common import (MESH_RESOLUTION, VIEW_SIZE, add_first_object_argument, bar_updater, check_first_object, heldout_objects,
+from .common import (MESH_RESOLUTION, VIEW_SIZE, add_first_object_argument, add_gltf_set_arguments, bar_updater, check_first_object, heldout_objects,
                      model_with_warning, require_at_least_one, require_range, view_progress_bar)
 
 
@@ -19,8 +19,7 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--size", type=int, default=128, help="side of the protocol views in pixels (default 128)")
     parser.add_argument("--updates", type=int, default=4, help="updates to score (default 4)")
     parser.add_argument("--output-views", type=int, help="score at most this many output views per object (default: all 12)")
-    parser.add_argument("--models", type=Path, default=Path("../shared/data/pbr_models"), help="glTF folder of the gltf set")
-    parser.add_argument("--environments", type=Path, default=Path("../shared/data/envmaps"), help="HDR folder of the gltf set")
+    add_gltf_set_arguments(parser)
     parser.add_argument("--mesh-resolution", type=int, default=96, help="marching-cubes grid for the Chamfer distance (default 96)")
     parser.add_argument("--baselines", action="store_true",
                         help="also score, on the same views, the untrained network of the same architecture, a sphere of the inputs' "

@@ -9,18 +9,15 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from .common import require_range
-
+from .common import add_gltf_set_arguments, require_range
 
 
 def default_out() -> Path:
-    """The installed package's own checkpoint, which `lirm refine --material-network` reads (not a path
-    relative to wherever the command is run)."""
-    from importlib import resources
-
+    """The installed package's own checkpoint, which `lirm refine --material-network` reads."""
+    from ..model.pretrained import checkpoints_folder
     from ..refine.image_materials import SHIPPED_NAME
 
-    return Path(str(resources.files("lirm.resources"))) / "checkpoints" / SHIPPED_NAME
+    return checkpoints_folder() / SHIPPED_NAME
 
 
 def add_parser(subparsers) -> None:
@@ -40,8 +37,7 @@ def add_parser(subparsers) -> None:
                         help="score the trained network on this many held-out synthetic objects' input views (default 8; 0: none)")
     parser.add_argument("--eval-set", choices=("synthetic", "gltf"), default="synthetic",
                         help="score on the held-out synthetic objects or on the glTF set's models (default synthetic)")
-    parser.add_argument("--models", type=Path, default=Path("../shared/data/pbr_models"), help="glTF folder of the gltf set")
-    parser.add_argument("--environments", type=Path, default=Path("../shared/data/envmaps"), help="HDR folder of the gltf set")
+    add_gltf_set_arguments(parser)
     parser.add_argument("--eval-only", type=Path, metavar="WEIGHTS", help="instead: only score these weights")
     parser.set_defaults(run=run)
 

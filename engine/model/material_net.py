@@ -82,6 +82,13 @@ def network_input(images: np.ndarray, masks: np.ndarray) -> torch.Tensor:
     return torch.from_numpy(np.ascontiguousarray(x.transpose(0, 3, 1, 2)))
 
 
+def object_exposure(images: np.ndarray, masks: np.ndarray, gain) -> np.ndarray:
+    """(V, H, W, 3) photos on white with the object's display values scaled by `gain` (a number, or
+    one per photo broadcast as (V, 1, 1, 1)): the white around the object stays white, as the
+    capture's crop makes it. The training's exposure jitter and the familiarity check's variants."""
+    return np.clip(1.0 - masks[..., None] + masks[..., None] * images * gain, 0.0, 1.0)
+
+
 @dataclass
 class PixelMaterials:
     """Per-pixel predictions for V photos, at the photos' own size."""

@@ -13,11 +13,11 @@ holds its materials to the network only on photos where fewer than `LIMIT` of th
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from .material_net import MaterialNet, predict_materials
+from .material_net import MaterialNet, PixelMaterials, object_exposure, predict_materials
 
 GAINS = (0.85, 1.0, 1.15)  # the training's exposure jitter is U(0.85, 1.15)
 SPREAD = 0.3  # a pixel whose metallic moves by more than this under the variations is unstable
@@ -30,6 +30,9 @@ LIMIT = 0.02
 class Familiarity:
     unstable_fraction: float  # of the object's pixels (mask > 0.5) over all the photos
     limit: float = LIMIT
+    # The prediction on the photos as they are (one of the variants), so that a caller that trusts
+    # the network need not predict again.
+    as_photographed: PixelMaterials | None = field(default=None, repr=False, compare=False)
 
     @property
     def familiar(self) -> bool:
@@ -48,17 +51,17 @@ def material_net_familiarity(net: MaterialNet, images: np.ndarray, masks: np.nda
     inside = masks > 0.5
     if not inside.any():
         return Familiarity(1.0)
-    low = high = None
+    low = high = as_photographed = None
     for mirrored in (False, True):
         for gain in GAINS:
-            # The gain reaches the object only: the white around it stays white, as in training.
-            varied = np.clip(1.0 - masks[..., None] + masks[..., None] * images * gain, 0.0, 1.0)
+            varied = images if gain == 1.0 else object_exposure(images, masks, gain)  # (1.0: the photos as they are)
             m = masks
             if mirrored:
                 varied, m = varied[:, :, ::-1], m[:, :, ::-1]
-            metallic = predict_materials(net, np.ascontiguousarray(varied), np.ascontiguousarray(m)).metallic
-            if mirrored:
-                metallic = metallic[:, :, ::-1]
+            predicted = predict_materials(net, np.ascontiguousarray(varied), np.ascontiguousarray(m))
+            if not mirrored and gain == 1.0:
+                as_photographed = predicted
+            metallic = predicted.metallic[:, :, ::-1] if mirrored else predicted.metallic
             low = metallic if low is None else np.minimum(low, metallic)
             high = metallic if high is None else np.maximum(high, metallic)
-    return Familiarity(float(((high - low)[inside] > SPREAD).mean()))
+    return Familiarity(float(((high - low)[inside] > SPREAD).mean()), as_photographed=as_photographed)

@@ -44,9 +44,14 @@ class ModelSource:
                 "the reconstruction will not look like the object. Pass --checkpoint PATH to a trained model.")
 
 
+def checkpoints_folder() -> Path:
+    """The installed package's resources/checkpoints (not a path relative to wherever a command runs)."""
+    return Path(str(resources.files("lirm.resources"))) / "checkpoints"
+
+
 def shipped_file(name: str) -> Path | None:
     """resources/checkpoints/`name` of the installed package, when it is there."""
-    path = Path(str(resources.files("lirm.resources"))) / "checkpoints" / name
+    path = checkpoints_folder() / name
     return path if path.exists() else None
 
 

@@ -35,13 +35,14 @@ def pixel_material_targets(images: np.ndarray, masks: np.ndarray, net_path: str 
         raise LirmUserError(f"the image-space material prior is on but no network ships in resources/checkpoints/{SHIPPED_NAME}; "
                             "train one with `lirm train-materials` or turn the prior off (losses.image_metallic, image_roughness and image_albedo at 0)")
     net, _ = load_material_net(path)
-    said = f"the material network used ({path.name}: on every photo, as asked)"
+    said, maps = f"the material network used ({path.name}: on every photo, as asked)", None
     if check_familiarity:
         familiarity = material_net_familiarity(net, images, masks)
-        said = familiarity.describe()
+        said, maps = familiarity.describe(), familiarity.as_photographed
         if not familiarity.familiar:
             return None, said
-    maps = predict_materials(net, images, masks)
+    if maps is None:
+        maps = predict_materials(net, images, masks)
     flat = np.concatenate([maps.metallic[..., None], maps.roughness[..., None], maps.albedo], axis=-1)
     return torch.from_numpy(np.ascontiguousarray(flat.reshape(-1, 5), dtype=np.float32)), said
 

@@ -19,7 +19,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from lirm.engine.model.material_net import WORKING_SIZE, MaterialNet, MaterialNetConfig, network_input
+from lirm.engine.model.material_net import WORKING_SIZE, MaterialNet, MaterialNetConfig, network_input, object_exposure
 from lirm.engine.synth.material_variety import make_varied_scene
 from lirm.engine.synth.training_scenes import TrainingSceneConfig, make_training_scene
 
@@ -123,8 +123,7 @@ def train_material_net(data: MaterialData, config: MaterialTrainingConfig, net_c
         images = data.images[pick]
         masks = data.masks[pick]
         gain = rng.uniform(1.0 - config.exposure_jitter, 1.0 + config.exposure_jitter, (config.batch, 1, 1, 1))
-        # The gain reaches the object only: the white around it stays white, as the capture's crop makes it.
-        images = np.clip(1.0 - masks[..., None] + masks[..., None] * images * gain, 0.0, 1.0)
+        images = object_exposure(images, masks, gain)
         maps = [data.albedo[pick], data.roughness[pick], data.metallic[pick]]
         flip = rng.uniform(size=config.batch) < 0.5
         images, masks = _flip(images, flip), _flip(masks, flip)

@@ -7,8 +7,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from ...errors import LirmUsageError
-from ..common import (VIEW_SIZE, add_first_object_argument, bar_updater, check_first_object, heldout_objects, model_with_warning,
-                      require_at_least_one, require_range, view_progress_bar)
+from ..common import (VIEW_SIZE, add_first_object_argument, add_gltf_set_arguments, bar_updater, check_first_object,
+                      heldout_objects, model_with_warning, require_at_least_one, require_range, view_progress_bar)
 
 
 def add_parser(subparsers) -> None:
@@ -29,8 +29,7 @@ def add_parser(subparsers) -> None:
                              "of the two agrees better with the inputs, as `lirm refine` starts a capture)")
     parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                         help="a refinement setting, e.g. losses.eikonal=0, edge_ray_fraction=0, plane_resolutions=(128,); repeatable")
-    parser.add_argument("--models", type=Path, default=Path("../shared/data/pbr_models"), help="glTF folder of the gltf set")
-    parser.add_argument("--environments", type=Path, default=Path("../shared/data/envmaps"), help="HDR folder of the gltf set")
+    add_gltf_set_arguments(parser)
     parser.add_argument("--warm-start", action="store_true",
                         help="instead: refining again after new views, cold (from LIRM) for the first --minutes against warm "
                              "(from the earlier refinement) for 1/4, 1/2 and all of it")
