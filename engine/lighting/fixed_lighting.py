@@ -10,9 +10,12 @@ from .split_sum_shading import SplitSumTables
 
 
 class FixedLighting(torch.nn.Module):
-    def __init__(self, tables: SplitSumTables):
+    def __init__(self, tables: SplitSumTables, camera_response: str = "aces"):
         super().__init__()
         self.tables = tables  # on the refinement's device already: nothing here moves or learns
+        # The tone curve the photos were taken through (camera_response.RESPONSES), as PanoramaLighting
+        # carries it: the held-out views are rendered through the renderer's own display, ACES.
+        self.camera_response = camera_response
 
     def observation_loss(self) -> torch.Tensor:
         return torch.zeros(())

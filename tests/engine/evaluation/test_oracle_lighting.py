@@ -63,3 +63,28 @@ def test_the_true_panorama_oracle_is_the_true_light_in_the_fits_own_texels_held_
     # same environment gives a median of 13% and a worst normal of 116% of the mean (measured).
     assert float((error / total).median()) < 0.03, float((error / total).median())
     assert float((error / total.mean()).max()) < 0.3, float((error / total.mean()).max())
+
+
+def test_a_refinement_runs_under_each_oracle_lighting():
+    """The bench's `--lighting truth` and `truth-panorama` refine with the materials under them (the
+    oracle once lacked the tone curve the photometric term reads, and the bench crashed)."""
+    from dataclasses import replace
+
+    from lirm.engine.evaluation.refined_rows import refine_object
+    from lirm.engine.model.lirm import LIRM
+    from lirm.engine.model.config import preset
+    from lirm.engine.refine.config import refine_preset
+
+    ctx = create_headless_context()
+    renderer = PBRRenderer(ctx)
+    try:
+        obj = synthetic_heldout(renderer, count=1, size=64, surface_points=100)[0]
+        config = replace(refine_preset("fast", inverse_rendering=True), iterations=3, minutes=None, hull_init_steps=2,
+                         material_network="off")
+        model = LIRM(preset("tiny")).eval()
+        for source in ("truth", "truth-panorama"):
+            refined = refine_object(model, obj, 1, config, "hull", true_lighting=renderer, lighting_source=source)
+            assert refined.steps == 3 and refined.lighting.camera_response == "aces"
+    finally:
+        renderer.release()
+        ctx.release()
