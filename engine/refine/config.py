@@ -76,6 +76,10 @@ class LossWeights:
     image_metallic: float = 0.1
     image_roughness: float = 0.0
     image_albedo: float = 0.1
+    # The albedo's brightness from pixel to pixel held to the network's too, up to one scale for the
+    # whole batch (the brightness of the light and of the paint are still the fit's to share): the
+    # network has learnt to tell a dark paint from a shadowed side. (README: what it was worth.)
+    image_albedo_shade: float = 0.0
     light_seen: float = 0.2
     light_smooth: float = 0.02
     # The fitted light's colour held neutral where no photo saw it (PanoramaLighting.neutrality_loss).
@@ -84,7 +88,7 @@ class LossWeights:
 
     @property
     def reads_material_network(self) -> bool:
-        return bool(self.image_metallic or self.image_roughness or self.image_albedo)
+        return bool(self.image_metallic or self.image_roughness or self.image_albedo or self.image_albedo_shade)
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -47,13 +47,22 @@ def pixel_material_targets(images: np.ndarray, masks: np.ndarray, net_path: str 
     return torch.from_numpy(np.ascontiguousarray(flat.reshape(-1, 5), dtype=np.float32)), said
 
 
+LUMINANCE = (0.2126, 0.7152, 0.0722)  # linear Rec. 709
+
+
 def image_material_terms(roughness: torch.Tensor, metallic: torch.Tensor, albedo: torch.Tensor, targets: torch.Tensor,
-                         with_albedo: bool) -> dict[str, torch.Tensor]:
+                         with_albedo: bool, with_shade: bool = False) -> dict[str, torch.Tensor]:
     """L1 of the solid rays' (opacity-normalised) metallic and roughness against the network's; with
-    `with_albedo`, also of the albedo's chromaticity (its brightness is the lighting's to share)."""
+    `with_albedo`, also of the albedo's chromaticity (its brightness is the lighting's to share); with
+    `with_shade`, of the albedo's log luminance against the network's after the batch's median
+    difference is taken out (one brightness scale for the whole object stays free)."""
     terms = {"image_metallic": (metallic - targets[:, 0]).abs().mean(), "image_roughness": (roughness - targets[:, 1]).abs().mean()}
     if with_albedo:
         chroma = albedo / albedo.sum(-1, keepdim=True).clamp(min=1e-3)
         target = targets[:, 2:5] / targets[:, 2:5].sum(-1, keepdim=True).clamp(min=1e-3)
         terms["image_albedo"] = (chroma - target).abs().sum(-1).mean()
+    if with_shade:
+        weights = albedo.new_tensor(LUMINANCE)
+        difference = (albedo @ weights).clamp(min=1e-3).log() - (targets[:, 2:5] @ weights).clamp(min=1e-3).log()
+        terms["image_albedo_shade"] = (difference - difference.detach().median()).abs().mean()
     return terms

@@ -72,7 +72,7 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
                                              shared_albedo=weights.shared_albedo > 0,
                                              light_neutral=weights.light_neutral > 0,
                                              material_targets=material_targets if weights.reads_material_network else None,
-                                             image_albedo=weights.image_albedo > 0))
+                                             image_albedo=weights.image_albedo > 0, image_albedo_shade=weights.image_albedo_shade > 0))
         if weights.albedo_pairs and pairs is not None and pairs.shape[0]:
             terms["albedo_pairs"] = paired_albedo_smoothness(render, colours, alphas, pairs, lighting.camera_response)
         weights = replace(weights, albedo=0.0)  # the albedo is fitted through the shading, not to the colour
@@ -149,7 +149,7 @@ def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alpha
                             shared_materials: bool = False, share_metallic: bool = True,
                             sigma: float = ALBEDO_SIGMA, unshaded_albedo: bool = False, shared_albedo: bool = False,
                             light_neutral: bool = False, material_targets: torch.Tensor | None = None,
-                            image_albedo: bool = False) -> dict[str, torch.Tensor]:
+                            image_albedo: bool = False, image_albedo_shade: bool = False) -> dict[str, torch.Tensor]:
     """The PBR materials at the rays' surfaces shaded under `lighting` (the renderer's split-sum model),
     through the camera's tone curve, against the photo, where both say object; and the lighting's own
     terms (what the backgrounds saw, smoothness)."""
@@ -169,7 +169,7 @@ def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alpha
     shaded = shade(lighting, albedo, roughness, metallic, normal, view).radiance
     terms["pbr"] = (radiance_to_display_torch(shaded, lighting.camera_response) - colours[solid]).abs().mean()
     if material_targets is not None:
-        terms.update(image_material_terms(roughness, metallic, albedo, material_targets[solid], image_albedo))
+        terms.update(image_material_terms(roughness, metallic, albedo, material_targets[solid], image_albedo, image_albedo_shade))
     if shared_materials:
         terms["shared_materials"] = shared_material_loss(albedo, roughness, metallic if share_metallic else None, sigma)
     if shared_albedo:

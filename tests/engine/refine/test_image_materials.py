@@ -22,6 +22,16 @@ def test_the_terms_vanish_at_the_target_and_the_albedo_term_reads_only_chromatic
     assert "image_albedo" not in image_material_terms(targets[:, 1], targets[:, 0], albedo, targets, with_albedo=False)
 
 
+def test_the_shade_term_reads_the_albedos_relative_brightness_not_its_scale():
+    targets = torch.tensor([[0.0, 0.5, 0.8, 0.8, 0.8], [0.0, 0.5, 0.2, 0.2, 0.2], [0.0, 0.5, 0.4, 0.1, 0.1]])
+    scaled = image_material_terms(targets[:, 1], targets[:, 0], targets[:, 2:5] * 0.3, targets, with_albedo=False, with_shade=True)
+    assert float(scaled["image_albedo_shade"]) == pytest.approx(0.0, abs=1e-6)  # the whole object darker: free
+    flattened = torch.full((3, 3), 0.5)  # a dark paint lifted to the bright one's level, as baked shading would
+    shaded = image_material_terms(targets[:, 1], targets[:, 0], flattened, targets, with_albedo=False, with_shade=True)
+    assert float(shaded["image_albedo_shade"]) > 0.3
+    assert "image_albedo_shade" not in image_material_terms(targets[:, 1], targets[:, 0], flattened, targets, with_albedo=True)
+
+
 def test_targets_follow_the_views_pixel_order(tmp_path):
     torch.manual_seed(0)
     path = save_material_net(MaterialNet(PRESETS["small"]), tmp_path / "m.safetensors")
