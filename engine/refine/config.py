@@ -142,6 +142,10 @@ class RefineConfig:
     # gradient at each ray's surface point: the normal the export's normal map stores (README: what each was worth);
     # "sdf-fixed", the same normal without letting the shading move the surface.
     shading_normal: str = "sdf"
+    # With an SDF shading normal: the PBR term's lobe widened by the spread of the surface's normal over
+    # each pixel (footprint_roughness.py), so that a thin rim need not be fitted rough to look as
+    # blurred as its photo. (README: what it was worth.)
+    footprint_roughness: bool = False
     # The floor term (losses.floor) from this share of the budget on; its height is followed from the start.
     floor_start: float = 0.2
     # The albedo smoothness term's pairs: this share of each batch's uniform rays comes as neighbours of

@@ -14,6 +14,7 @@ from lirm.engine.lighting.split_sum_shading import shade
 
 from .albedo_smoothness import albedo_difference
 from .config import CURVATURE_STEP, LossWeights
+from .footprint_roughness import widened_roughness
 from .image_materials import image_material_terms
 from .outside_bounds import OutsideBounds
 from .ray_rendering import RayBatchRender
@@ -166,7 +167,9 @@ def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alpha
     roughness = (render.roughness[solid] / o).clamp(0.0, 1.0)
     metallic = (render.metallic[solid] / o).clamp(0.0, 1.0)
     normal, view = render.normal[solid], -directions[solid]
-    shaded = shade(lighting, albedo, roughness, metallic, normal, view).radiance
+    # The lobe the pixel sees: the material's, widened by the curve of the surface across the pixel.
+    seen_roughness = roughness if render.normal_spread is None else widened_roughness(roughness, render.normal_spread[solid])
+    shaded = shade(lighting, albedo, seen_roughness, metallic, normal, view).radiance
     terms["pbr"] = (radiance_to_display_torch(shaded, lighting.camera_response) - colours[solid]).abs().mean()
     if material_targets is not None:
         terms.update(image_material_terms(roughness, metallic, albedo, material_targets[solid], image_albedo, image_albedo_shade))
@@ -178,7 +181,7 @@ def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alpha
         terms["albedo_unshaded"] = normal_explained_albedo(albedo, normal)
     if not delit:  # its four extra shadings per ray are only worth paying for when the term counts
         return terms
-    target, usable = delit_albedo(lighting, colours[solid], roughness.detach(), metallic.detach(), normal.detach(), view)
+    target, usable = delit_albedo(lighting, colours[solid], seen_roughness.detach(), metallic.detach(), normal.detach(), view)
     if usable.any():
         terms["albedo_delit"] = (albedo[usable] - target[usable]).abs().mean()
     return terms

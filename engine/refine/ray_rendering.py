@@ -39,6 +39,9 @@ class RayBatchRender:
     depth: torch.Tensor  # (N,) the distance along the ray, premultiplied (detached: where the photos see a surface)
     surface_points: torch.Tensor  # (K, 3) detached fine samples with weight: where the eikonal term looks
     samples: int  # field evaluations with gradient in this batch
+    # (N,) the slope variance of the surface's normal over each ray's pixel (footprint_roughness.py),
+    # 0 where the ray meets no surface; None: not measured (the shading reads each ray's one normal).
+    normal_spread: torch.Tensor | None = None
 
 
 def render_ray_batch(field, origins: torch.Tensor, directions: torch.Tensor, grid: OccupancyGrid | None, beta: float,
@@ -112,13 +115,16 @@ def render_ray_batch(field, origins: torch.Tensor, directions: torch.Tensor, gri
 
 
 def with_sdf_normals(field, render: RayBatchRender, origins: torch.Tensor, directions: torch.Tensor,
-                     shape_surface: bool = True) -> RayBatchRender:
+                     shape_surface: bool = True, pixel_angles: torch.Tensor | None = None) -> RayBatchRender:
     """The batch with its shading normal replaced by the SDF's own gradient (central differences at
     the field's `normal_eps`, as the export's normal map stores it) at each ray's expected surface
     point, where the ray is mostly opaque; elsewhere the head's normal stays. The gradient reaches
     the SDF, so the shading can shape the surface too; with `shape_surface` False it does not (the
-    normal is read as it is, and only the materials and the lighting answer to the shading)."""
+    normal is read as it is, and only the materials and the lighting answer to the shading). With
+    `pixel_angles` (N,), also the spread of the normal over each ray's pixel (footprint_roughness.py)."""
     from lirm.engine.model.volume_renderer import numerical_normals
+
+    from .footprint_roughness import footprint_normal_spread
 
     opacity = render.opacity.detach()
     hit = opacity > 0.5
@@ -130,7 +136,11 @@ def with_sdf_normals(field, render: RayBatchRender, origins: torch.Tensor, direc
     with torch.set_grad_enabled(shape_surface and torch.is_grad_enabled()):
         surface_normal = numerical_normals(field, points)
     normal[hit] = surface_normal * render.opacity[hit, None]  # premultiplied, like the head's
-    return replace(render, normal=normal)
+    spread = None
+    if pixel_angles is not None:
+        spread = torch.zeros_like(opacity)
+        spread[hit] = footprint_normal_spread(field, points, surface_normal.detach(), directions[hit], distance, pixel_angles[hit])
+    return replace(render, normal=normal, normal_spread=spread)
 
 
 @torch.no_grad()

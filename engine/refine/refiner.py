@@ -179,7 +179,8 @@ def refine_field(refinable: RefinableField, views: RefineViews, config: RefineCo
                                       config.fine_samples, generator, materials=materials,
                                       prune_weight=config.appearance_weight)
             if shading is not None and config.shading_normal in ("sdf", "sdf-fixed"):
-                render = with_sdf_normals(field_, render, origins, directions, shape_surface=config.shading_normal == "sdf")
+                render = with_sdf_normals(field_, render, origins, directions, shape_surface=config.shading_normal == "sdf",
+                                          pixel_angles=views.pixel_angles[index].to(device) if config.footprint_roughness else None)
             if floor is not None:
                 floor.observe(origins, directions, render.depth, render.opacity.detach(), alphas,
                               views.pixel_angles[index].to(device), 1.0 / inv_beta)

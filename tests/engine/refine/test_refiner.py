@@ -150,7 +150,7 @@ def test_a_predicted_material_is_kept_where_the_photos_say_nothing(sphere_views)
 
 
 def _refined_with_terms(sphere_views, inverse_rendering: bool = True, material_net: str = "", material_network: str = "off",
-                        **weights):
+                        footprint_roughness: bool = False, **weights):
     """Ten steps from the tiny field on the sphere's views with the given loss weights; with
     `inverse_rendering`, the materials fitted from the first step under an 8 x 16 studio panorama.
     Returns (the result, the lighting or None)."""
@@ -161,7 +161,7 @@ def _refined_with_terms(sphere_views, inverse_rendering: bool = True, material_n
     grid = initial_fields.sampling_grid(hull, 1.0, 1)
     lighting = None
     config = replace(SMALL, iterations=10, losses=replace(SMALL.losses, **weights), material_net=material_net,
-                     material_network=material_network)
+                     material_network=material_network, footprint_roughness=footprint_roughness)
     if inverse_rendering:
         lighting = PanoramaLighting.from_environment(make_procedural_environment("studio", width=64), height=8)
         config = replace(config, inverse_rendering=True, pbr_start=0.0)
@@ -192,6 +192,16 @@ def test_the_inverse_rendering_keeps_the_albedo_from_following_the_normal(sphere
     result, _ = _refined_with_terms(sphere_views, albedo_unshaded=1.0)
     unshaded = _term_values(result, "albedo_unshaded")
     assert unshaded and all(np.isfinite(v) and v >= 0 for v in unshaded), result.history
+
+
+def test_the_pixel_footprint_widens_the_lobe_the_inverse_rendering_shades(sphere_views):
+    """With footprint_roughness the PBR term shades each ray with its pixel's spread of normals added:
+    the same steps from the same seed give other (finite) photometric errors."""
+    plain, _ = _refined_with_terms(sphere_views)
+    widened, _ = _refined_with_terms(sphere_views, footprint_roughness=True)
+    before, after = _term_values(plain, "pbr"), _term_values(widened, "pbr")
+    assert len(before) == len(after) and all(np.isfinite(v) for v in after)
+    assert before[0] != after[0]
 
 
 def test_the_inverse_rendering_holds_the_materials_to_the_material_networks(sphere_views, tmp_path):
