@@ -79,7 +79,7 @@ class LossWeights:
     # The albedo's brightness from pixel to pixel held to the network's too, up to one scale for the
     # whole batch (the brightness of the light and of the paint are still the fit's to share): the
     # network has learnt to tell a dark paint from a shadowed side. Since stop 82: over the 8 held-out
-    # synthetic objects albedo +1.3 dB, relighting +0.25 (README, "The albedo's shading, from the network").
+    # synthetic objects albedo +1.3 dB, relighting +0.24 (README, "The albedo's shading, from the network").
     image_albedo_shade: float = 0.1
     light_seen: float = 0.2
     light_smooth: float = 0.02

@@ -17,6 +17,7 @@ from lirm.engine.errors import LirmUserError
 from lirm.engine.model.material_net import load_material_net, predict_materials
 from lirm.engine.model.material_net_familiarity import material_net_familiarity
 from lirm.engine.model.pretrained import shipped_file
+from lirm.renderer.procedural_environments import LUMINANCE_WEIGHTS
 
 SHIPPED_NAME = "material-net.safetensors"
 
@@ -33,7 +34,7 @@ def pixel_material_targets(images: np.ndarray, masks: np.ndarray, net_path: str 
     path = Path(net_path) if net_path else shipped_material_net()
     if path is None:
         raise LirmUserError(f"the image-space material prior is on but no network ships in resources/checkpoints/{SHIPPED_NAME}; "
-                            "train one with `lirm train-materials` or turn the prior off (losses.image_metallic, image_roughness and image_albedo at 0)")
+                            "train one with `lirm train-materials` or turn the prior off (losses.image_metallic, image_roughness, image_albedo and image_albedo_shade at 0)")
     net, _ = load_material_net(path)
     said, maps = f"the material network used ({path.name}: on every photo, as asked)", None
     if check_familiarity:
@@ -45,9 +46,6 @@ def pixel_material_targets(images: np.ndarray, masks: np.ndarray, net_path: str 
         maps = predict_materials(net, images, masks)
     flat = np.concatenate([maps.metallic[..., None], maps.roughness[..., None], maps.albedo], axis=-1)
     return torch.from_numpy(np.ascontiguousarray(flat.reshape(-1, 5), dtype=np.float32)), said
-
-
-LUMINANCE = (0.2126, 0.7152, 0.0722)  # linear Rec. 709
 
 
 def image_material_terms(roughness: torch.Tensor, metallic: torch.Tensor, albedo: torch.Tensor, targets: torch.Tensor,
@@ -62,7 +60,7 @@ def image_material_terms(roughness: torch.Tensor, metallic: torch.Tensor, albedo
         target = targets[:, 2:5] / targets[:, 2:5].sum(-1, keepdim=True).clamp(min=1e-3)
         terms["image_albedo"] = (chroma - target).abs().sum(-1).mean()
     if with_shade:
-        weights = albedo.new_tensor(LUMINANCE)
+        weights = albedo.new_tensor(LUMINANCE_WEIGHTS)
         difference = (albedo @ weights).clamp(min=1e-3).log() - (targets[:, 2:5] @ weights).clamp(min=1e-3).log()
         terms["image_albedo_shade"] = (difference - difference.detach().median()).abs().mean()
     return terms
