@@ -45,10 +45,22 @@ def _literal(option: str, flag: str, example: str) -> tuple[str, object]:
     return key, tuple(value) if isinstance(value, list) else value
 
 
+# Settings whose value is text (a path, a choice): their VALUE is taken as written, quotes optional,
+# so that `--option material_net=/path/net.safetensors` needs no Python quoting.
+TEXT_SETTINGS = frozenset(f.name for f in fields(RefineConfig) if isinstance(getattr(RefineConfig(), f.name), str))
+
+
 def apply_options(config: RefineConfig, options: list[str]) -> RefineConfig:
     """KEY=VALUE settings onto a RefineConfig; `losses.NAME=W` sets a loss weight. Values are Python
-    literals (numbers, tuples)."""
+    literals (numbers, tuples), or text for the text settings (TEXT_SETTINGS)."""
     for option in options:
+        key, sep, text = option.partition("=")
+        if sep and key in TEXT_SETTINGS:
+            try:
+                config = replace(config, **{key: text.strip().strip("'\"")})
+            except ValueError as error:
+                raise LirmUserError(f"--option {option!r}: {error}") from None
+            continue
         key, value = _literal(option, "--option", "losses.eikonal=0 or plane_resolutions=(128,)")
         if key.startswith("losses."):
             name = key[len("losses."):]

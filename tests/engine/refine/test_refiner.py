@@ -366,6 +366,19 @@ def test_bench_options_set_one_setting_each_and_refuse_unknown_ones():
             apply_options(refine_preset("default"), [bad])
 
 
+def test_bench_options_take_text_settings_as_written():
+    """A path or a choice needs no Python quoting (`--option material_net=/path/net.safetensors` once
+    failed as "not a number"); a choice the config refuses names the option."""
+    from lirm.engine.bench.refine_bench import apply_options
+
+    config = apply_options(refine_preset("default"), ["material_net=/tmp/other net.safetensors", "material_network='off'",
+                                                      "shading_normal=head"])
+    assert config.material_net == "/tmp/other net.safetensors" and config.material_network == "off"
+    assert config.shading_normal == "head"
+    with pytest.raises(LirmUserError, match="material_network=sometimes"):
+        apply_options(refine_preset("default"), ["material_network=sometimes"])
+
+
 def test_the_outside_bounds_term_is_in_the_loss_and_read_with_the_eikonals_probes(sphere_views):
     """The term keeping the field empty outside the sampling grid is in every step's loss, and its
     value read in one pass with the eikonal's probes (the mean of six central-difference probes) is
