@@ -100,9 +100,6 @@ def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig()
 
     mesh = extract_field_mesh(field_, surface_extraction(field_, config), progress=lambda message, k, n: stage(message, k),
                               timings=seconds)
-    placement = world_transform if callable(world_transform) else None
-    if placement is not None:
-        world_transform = placement(np.asarray(mesh.vertices, np.float64))
     t = stage(f"unwrapping {len(mesh.faces)} faces", 3)
     uv_mesh = unwrap(mesh, AtlasConfig(config.texture_size, config.atlas_padding))
     seconds["unwrap"] = time.perf_counter() - t
@@ -131,11 +128,13 @@ def export_field(field_, path: str | Path, config: ExportConfig = ExportConfig()
                 from .surface_heights import displaced
 
                 uv_mesh = displaced(uv_mesh, fit_report.surface_heights)
-                if placement is not None:  # the surface moved (a CI run found the demo's base 0.2 mm off the ground): place it again
-                    world_transform = placement(np.asarray(uv_mesh.positions, np.float64))
     finally:
         if context is None:
             ctx.release()
+    if callable(world_transform):
+        # Placed by the surface that is written: the texture fit's heights may have moved it (placed before
+        # them, the demo mug's base once sat 0.23 mm above the ground).
+        world_transform = world_transform(np.asarray(uv_mesh.positions, np.float64))
     t = stage(f"writing {path.name}", 5)
     textured = TexturedMesh(uv_mesh.positions, uv_mesh.normals, uv_mesh.tangents, uv_mesh.uvs, uv_mesh.faces,
                             textures.base_color_srgb8(), textures.metallic_roughness8(),
