@@ -17,6 +17,7 @@ from .config import CURVATURE_STEP, LossWeights
 from .footprint_roughness import widened_roughness
 from .image_materials import image_material_terms
 from .outside_bounds import OutsideBounds
+from .roughness_observability import SENSITIVITY_SCALE, roughness_sensitivity, unseen_roughness_term
 from .ray_rendering import RayBatchRender
 from .shared_materials import ALBEDO_SIGMA, shared_albedo_loss, shared_material_loss
 from .unshaded_albedo import normal_explained_albedo
@@ -73,7 +74,9 @@ def batch_loss(field, render: RayBatchRender, colours: torch.Tensor, alphas: tor
                                              shared_albedo=weights.shared_albedo > 0,
                                              light_neutral=weights.light_neutral > 0,
                                              material_targets=material_targets if weights.reads_material_network else None,
-                                             image_albedo=weights.image_albedo > 0, image_albedo_shade=weights.image_albedo_shade > 0))
+                                             image_albedo=weights.image_albedo > 0, image_albedo_shade=weights.image_albedo_shade > 0,
+                                             unseen_roughness=weights.image_roughness_unseen > 0,
+                                             unseen_roughness_scale=weights.unseen_roughness_scale))
         if weights.albedo_pairs and pairs is not None and pairs.shape[0]:
             terms["albedo_pairs"] = paired_albedo_smoothness(render, colours, alphas, pairs, lighting.camera_response)
         weights = replace(weights, albedo=0.0)  # the albedo is fitted through the shading, not to the colour
@@ -150,7 +153,8 @@ def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alpha
                             shared_materials: bool = False, share_metallic: bool = True,
                             sigma: float = ALBEDO_SIGMA, unshaded_albedo: bool = False, shared_albedo: bool = False,
                             light_neutral: bool = False, material_targets: torch.Tensor | None = None,
-                            image_albedo: bool = False, image_albedo_shade: bool = False) -> dict[str, torch.Tensor]:
+                            image_albedo: bool = False, image_albedo_shade: bool = False,
+                            unseen_roughness: bool = False, unseen_roughness_scale: float = SENSITIVITY_SCALE) -> dict[str, torch.Tensor]:
     """The PBR materials at the rays' surfaces shaded under `lighting` (the renderer's split-sum model),
     through the camera's tone curve, against the photo, where both say object; and the lighting's own
     terms (what the backgrounds saw, smoothness)."""
@@ -170,9 +174,15 @@ def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alpha
     # The lobe the pixel sees: the material's, widened by the curve of the surface across the pixel.
     seen_roughness = roughness if render.normal_spread is None else widened_roughness(roughness, render.normal_spread[solid])
     shaded = shade(lighting, albedo, seen_roughness, metallic, normal, view).radiance
-    terms["pbr"] = (radiance_to_display_torch(shaded, lighting.camera_response) - colours[solid]).abs().mean()
+    shaded_display = radiance_to_display_torch(shaded, lighting.camera_response)
+    terms["pbr"] = (shaded_display - colours[solid]).abs().mean()
     if material_targets is not None:
         terms.update(image_material_terms(roughness, metallic, albedo, material_targets[solid], image_albedo, image_albedo_shade))
+        if unseen_roughness:
+            sensitivity = roughness_sensitivity(lighting, albedo.detach(), seen_roughness.detach(), metallic.detach(),
+                                                normal.detach(), view, shaded_display.detach())
+            terms["image_roughness_unseen"] = unseen_roughness_term(roughness, material_targets[solid][:, 1], sensitivity,
+                                                                     unseen_roughness_scale)
     if shared_materials:
         terms["shared_materials"] = shared_material_loss(albedo, roughness, metallic if share_metallic else None, sigma)
     if shared_albedo:

@@ -205,14 +205,14 @@ def test_the_pixel_footprint_widens_the_lobe_the_inverse_rendering_shades(sphere
 
 
 def test_the_inverse_rendering_holds_the_materials_to_the_material_networks(sphere_views, tmp_path):
-    """With the image-space material terms on, both are in the loss of every step of the inverse rendering."""
+    """With the image-space material terms on, each is in the loss of every step of the inverse rendering."""
     from lirm.engine.model.material_net import PRESETS, MaterialNet, save_material_net
 
     torch.manual_seed(0)
     path = save_material_net(MaterialNet(PRESETS["small"]), tmp_path / "materials.safetensors")
     result, _ = _refined_with_terms(sphere_views, material_net=str(path), material_network="on", image_metallic=1.0,
-                                    image_roughness=1.0, image_albedo=1.0, image_albedo_shade=1.0)
-    for name in ("image_metallic", "image_roughness", "image_albedo", "image_albedo_shade"):
+                                    image_roughness=1.0, image_albedo=1.0, image_albedo_shade=1.0, image_roughness_unseen=1.0)
+    for name in ("image_metallic", "image_roughness", "image_albedo", "image_albedo_shade", "image_roughness_unseen"):
         values = _term_values(result, name)
         assert values and all(np.isfinite(v) and v > 0 for v in values), result.history
     assert "as asked" in result.material_network
