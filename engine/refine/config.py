@@ -83,7 +83,9 @@ class LossWeights:
     # highlight. Off: over the 8 held-out objects roughness 16.76 -> 17.69 dB, relighting 26.00 -> 25.68
     # (README, "The roughness, held to the network").
     image_roughness_unseen: float = 0.0
-    unseen_roughness_scale: float = 0.2  # the sensitivity at which that hold is halved (roughness_observability.SENSITIVITY_SCALE)
+    # The sensitivity (display change per unit of roughness) at which that hold is halved: 0.2 is a step of
+    # 0.05 in roughness moving the pixel by 0.01 (about 2.5 of 255), near the photos' quantisation and noise.
+    unseen_roughness_scale: float = 0.2
     # The albedo's brightness from pixel to pixel held to the network's too, up to one scale for the
     # whole batch (the brightness of the light and of the paint are still the fit's to share): the
     # network has learnt to tell a dark paint from a shadowed side. Since stop 82: over the 8 held-out

@@ -17,7 +17,7 @@ from .config import CURVATURE_STEP, LossWeights
 from .footprint_roughness import widened_roughness
 from .image_materials import image_material_terms
 from .outside_bounds import OutsideBounds
-from .roughness_observability import SENSITIVITY_SCALE, roughness_sensitivity, unseen_roughness_term
+from .roughness_observability import roughness_sensitivity, unseen_roughness_term
 from .ray_rendering import RayBatchRender
 from .shared_materials import ALBEDO_SIGMA, shared_albedo_loss, shared_material_loss
 from .unshaded_albedo import normal_explained_albedo
@@ -154,7 +154,8 @@ def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alpha
                             sigma: float = ALBEDO_SIGMA, unshaded_albedo: bool = False, shared_albedo: bool = False,
                             light_neutral: bool = False, material_targets: torch.Tensor | None = None,
                             image_albedo: bool = False, image_albedo_shade: bool = False,
-                            unseen_roughness: bool = False, unseen_roughness_scale: float = SENSITIVITY_SCALE) -> dict[str, torch.Tensor]:
+                            unseen_roughness: bool = False,
+                            unseen_roughness_scale: float = LossWeights.unseen_roughness_scale) -> dict[str, torch.Tensor]:
     """The PBR materials at the rays' surfaces shaded under `lighting` (the renderer's split-sum model),
     through the camera's tone curve, against the photo, where both say object; and the lighting's own
     terms (what the backgrounds saw, smoothness)."""
@@ -177,12 +178,12 @@ def inverse_rendering_terms(render: RayBatchRender, colours: torch.Tensor, alpha
     shaded_display = radiance_to_display_torch(shaded, lighting.camera_response)
     terms["pbr"] = (shaded_display - colours[solid]).abs().mean()
     if material_targets is not None:
-        terms.update(image_material_terms(roughness, metallic, albedo, material_targets[solid], image_albedo, image_albedo_shade))
+        targets = material_targets[solid]
+        terms.update(image_material_terms(roughness, metallic, albedo, targets, image_albedo, image_albedo_shade))
         if unseen_roughness:
             sensitivity = roughness_sensitivity(lighting, albedo.detach(), seen_roughness.detach(), metallic.detach(),
                                                 normal.detach(), view, shaded_display.detach())
-            terms["image_roughness_unseen"] = unseen_roughness_term(roughness, material_targets[solid][:, 1], sensitivity,
-                                                                     unseen_roughness_scale)
+            terms["image_roughness_unseen"] = unseen_roughness_term(roughness, targets[:, 1], sensitivity, unseen_roughness_scale)
     if shared_materials:
         terms["shared_materials"] = shared_material_loss(albedo, roughness, metallic if share_metallic else None, sigma)
     if shared_albedo:

@@ -25,9 +25,6 @@ from lirm.engine.lighting.camera_response import radiance_to_display_torch
 from lirm.engine.lighting.split_sum_shading import shade
 
 ROUGHNESS_STEP = 0.05  # the finite difference's step in roughness
-# Display change per unit of roughness at which a ray's hold is halved: 0.2 is a step of 0.05 in
-# roughness moving the pixel by 0.01 (about 2.5 of 255), near the photos' own quantisation and noise.
-SENSITIVITY_SCALE = 0.2
 
 
 @torch.no_grad()
@@ -43,7 +40,8 @@ def roughness_sensitivity(lighting, albedo: torch.Tensor, roughness: torch.Tenso
 
 
 def unseen_roughness_term(roughness: torch.Tensor, target: torch.Tensor, sensitivity: torch.Tensor,
-                          scale: float = SENSITIVITY_SCALE) -> torch.Tensor:
-    """L1 of the roughness against the network's, each ray weighted by how little its photo says."""
+                          scale: float) -> torch.Tensor:
+    """L1 of the roughness against the network's, each ray weighted by how little its photo says: halved
+    where the sensitivity is `scale` (config.LossWeights.unseen_roughness_scale)."""
     hold = scale / (scale + sensitivity)
     return (hold * (roughness - target).abs()).mean()
